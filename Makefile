@@ -1,0 +1,44 @@
+# sb3-swirl: `make demo` and `make test` set everything up first (idempotent .venv).
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: install demo demo-acrobot test test-slow bench lint format clean
+
+install: $(STAMP)
+
+$(STAMP): pyproject.toml wrappers/pyproject.toml Makefile
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	# torch first, pinned: an unpinned torch pulls a multi-GB CUDA build
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e ./wrappers -e ".[zoo,render,dev]"
+	# imitation pins old SB3/gymnasium; its data types work with ours (see NOTES-stack.md)
+	$(BIN)/python -m pip install --quiet --no-deps imitation==1.0.1 seals==0.2.1
+	touch $(STAMP)
+
+demo: install
+	$(BIN)/sb3-swirl demo parking
+
+demo-acrobot: install
+	$(BIN)/sb3-swirl demo acrobot
+
+test: install
+	$(BIN)/ruff check . && $(BIN)/ruff format --check .
+	$(BIN)/python -m pytest -n 2 -q
+
+test-slow: install
+	$(BIN)/python -m pytest -m slow -q
+
+bench: install
+	$(BIN)/python benchmarks/run_all.py
+
+lint: install
+	$(BIN)/ruff check . && $(BIN)/ruff format --check .
+
+format: install
+	$(BIN)/ruff format . && $(BIN)/ruff check --fix .
+
+clean:
+	rm -rf $(VENV) results .pytest_cache .ruff_cache
