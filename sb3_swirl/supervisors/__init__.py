@@ -1,0 +1,191 @@
+"""Supervisors: the scripted experts that demonstrate the paper's tasks.
+
+Every supervisor has the same small interface::
+
+    sup = Supervisor(env.unwrapped, seed=None)
+    obs, info = env.reset(seed=...)
+    sup.reset(obs)
+    action = sup.act(obs)  # each step
+
+and :func:`collect_demos` runs the right one for a registered env id.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any, Protocol
+
+import gymnasium as gym
+import numpy as np
+
+import sb3_swirl.envs  # noqa: F401  (registers the sb3_swirl/ env ids)
+from sb3_swirl.demos import Demonstration
+from sb3_swirl.supervisors.acrobot import AcrobotSupervisor
+
+#: env id -> ``"module:Class"`` of its supervisor, imported on first use
+SUPERVISORS: dict[str, str] = {
+    "sb3_swirl/ParallelParking-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
+    "sb3_swirl/ParallelParkingPartial-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
+    "sb3_swirl/ParallelParkingPerturbed-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
+    "sb3_swirl/NoisyAcrobot-v0": "sb3_swirl.supervisors.acrobot:AcrobotSupervisor",
+}
+
+
+class Supervisor(Protocol):
+    """What :func:`collect_demos` needs from a supervisor."""
+
+    def __init__(self, env: gym.Env, seed: int | None = None) -> None: ...
+
+    def reset(self, obs: np.ndarray) -> None: ...
+
+    def act(self, obs: np.ndarray) -> int: ...
+
+
+def supervisor_for(env_id: str) -> type[Supervisor]:
+    """The supervisor class for a registered env id.
+
+    Raises
+    ------
+    ValueError
+        If no supervisor is registered for ``env_id``; the message lists the supported ids.
+    """
+    try:
+        target = SUPERVISORS[env_id]
+    except (KeyError, TypeError):
+        raise ValueError(
+            f"no supervisor for env id {env_id!r}; supported ids: {sorted(SUPERVISORS)}"
+        ) from None
+    module_name, class_name = target.split(":")
+    return getattr(importlib.import_module(module_name), class_name)
+
+
+def collect_demos(
+    env_id: str,
+    n: int,
+    seed: int = 0,
+    *,
+    progress: bool = False,
+    max_attempts: int | None = None,
+    **env_kwargs: Any,
+) -> list[Demonstration]:
+    """Run the env's supervisor for ``n`` successful episodes and return them as demos.
+
+    Episode ``i`` is reset with a seed drawn from ``np.random.SeedSequence(seed).spawn``,
+    so the first ``m`` demos do not depend on ``n`` and the same ``seed`` gives the same demos.
+
+    Parameters
+    ----------
+    env_id : str
+        A registered id with a supervisor (see :data:`SUPERVISORS`), e.g.
+        ``"sb3_swirl/NoisyAcrobot-v0"``.
+    n : int
+        Number of demonstrations.
+    seed : int, default 0
+        Seeds the episodes and the supervisor.
+    progress : bool, default False
+        Show a rich progress bar.
+    max_attempts : int, optional
+        Episodes to try at most. By default every episode must succeed (a supervisor is
+        expected to be reliable, and silently dropping failures would bias the demos towards
+        easy starts); with ``max_attempts > n``, failed episodes are skipped until ``n`` succeed.
+    **env_kwargs
+        Passed to ``gym.make`` (e.g. ``link_length_2=1.5``).
+
+    Returns
+    -------
+    list of Demonstration
+        ``observations`` (T + 1, d) float64, ``actions`` (T,) int64, ``rewards`` (T,) float64.
+
+    Raises
+    ------
+    ValueError
+        Unknown ``env_id``, or ``n`` / ``max_attempts`` not positive integers with
+        ``max_attempts >= n``.
+    RuntimeError
+        If fewer than ``n`` episodes succeed within ``max_attempts``; names the failed seeds.
+
+    Examples
+    --------
+    >>> demos = collect_demos("sb3_swirl/NoisyAcrobot-v0", 2, seed=0)
+    >>> demos[0].observations.shape[1], demos[0].actions.dtype
+    (4, dtype('int64'))
+    """
+    supervisor_cls = supervisor_for(env_id)
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+        raise ValueError(f"n must be a positive integer, got {n!r}")
+    attempts = n if max_attempts is None else max_attempts
+    if isinstance(attempts, bool) or not isinstance(attempts, int | np.integer) or attempts < n:
+        raise ValueError(f"max_attempts must be an integer >= n = {n}, got {max_attempts!r}")
+    children = np.random.SeedSequence(seed).spawn(int(attempts))
+
+    env = gym.make(env_id, **env_kwargs)
+    demos: list[Demonstration] = []
+    failed: list[int] = []
+    try:
+        with _progress_bar(progress, f"{env_id} demos", n) as advance:
+            for child in children:
+                env_seed, supervisor_seed = (int(x) for x in child.generate_state(2))
+                demo = _run_episode(env, supervisor_cls, env_seed, supervisor_seed)
+                if demo is None:
+                    failed.append(env_seed)
+                    if max_attempts is None:
+                        break
+                    continue
+                demos.append(demo)
+                advance()
+                if len(demos) == n:
+                    break
+    finally:
+        env.close()
+    if len(demos) < n:
+        raise RuntimeError(
+            f"{supervisor_cls.__name__} failed on {env_id} with env seed(s) {failed} "
+            f"({len(demos)} of {n} demos collected in {len(demos) + len(failed)} episodes); "
+            "pass max_attempts > n to skip failed episodes"
+        )
+    return demos
+
+
+def _run_episode(
+    env: gym.Env, supervisor_cls: type[Supervisor], env_seed: int, supervisor_seed: int
+) -> Demonstration | None:
+    """One supervised episode; ``None`` unless it ends in success."""
+    supervisor = supervisor_cls(env.unwrapped, seed=supervisor_seed)
+    obs, _ = env.reset(seed=env_seed)
+    supervisor.reset(obs)
+    observations = [obs]
+    actions: list[int] = []
+    rewards: list[float] = []
+    while True:
+        action = supervisor.act(obs)
+        obs, reward, terminated, truncated, info = env.step(action)
+        observations.append(obs)
+        actions.append(action)
+        rewards.append(float(reward))
+        if terminated or truncated:
+            break
+    if not info.get("is_success", False):
+        return None
+    return Demonstration(
+        observations=np.asarray(observations, dtype=np.float64),
+        actions=np.asarray(actions, dtype=np.int64),
+        rewards=np.asarray(rewards, dtype=np.float64),
+    )
+
+
+@contextmanager
+def _progress_bar(enabled: bool, description: str, total: int) -> Iterator[Callable[[], None]]:
+    """A rich progress bar when ``enabled``, a no-op otherwise; yields its ``advance``."""
+    if not enabled:
+        yield lambda: None
+        return
+    from rich.progress import Progress
+
+    with Progress() as bar:
+        task = bar.add_task(description, total=total)
+        yield lambda: bar.advance(task)
+
+
+__all__ = ["SUPERVISORS", "AcrobotSupervisor", "Supervisor", "collect_demos", "supervisor_for"]
