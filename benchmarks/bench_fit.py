@@ -1,0 +1,61 @@
+"""Fit time of ``fit_task`` against the number of demonstrations (about 1000 steps, 4-D each).
+
+Targets: 15 demos <= 5 s, 1000 demos <= 60 s, and growth at most linear (the per-demo time
+should not rise with the number of demos). Run: ``python benchmarks/bench_fit.py [--quick]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from sb3_swirl.demos import make_piecewise_linear_demos
+from sb3_swirl.fitting import fit_task
+
+
+def _demos(n_demos: int, steps: int, seed: int):
+    phases = 5
+    per_phase = steps // phases
+    return make_piecewise_linear_demos(
+        n_demos=n_demos,
+        n_phases=phases,
+        dim=4,
+        phase_length=(int(0.8 * per_phase), int(1.2 * per_phase)),
+        noise=0.05,
+        random_state=seed,
+    )[0]
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true", help="small sizes, a smoke run")
+    parser.add_argument("--indicator", default="gmm", choices=["gmm", "velocity", "linear"])
+    args = parser.parse_args(argv)
+    sizes, steps = ([5, 20], 200) if args.quick else ([15, 60, 240, 1000], 1000)
+
+    print(f"fit_task, indicator={args.indicator}, 4-D demos of ~{steps} steps")
+    print(f"{'demos':>6} {'steps':>9} {'fit s':>8} {'ms/demo':>8} {'ratio':>6} {'regions':>7}")
+    base = None
+    rows = []
+    for n in sizes:
+        demos = _demos(n, steps, seed=n)
+        start = time.perf_counter()
+        task = fit_task(demos, indicator=args.indicator, random_state=0)
+        elapsed = time.perf_counter() - start
+        per_demo = elapsed / n
+        base = per_demo if base is None else base
+        rows.append((n, elapsed))
+        print(
+            f"{n:>6} {sum(len(d) for d in demos):>9} {elapsed:>8.2f} {1e3 * per_demo:>8.1f} "
+            f"{per_demo / base:>6.2f} {task.n_segments:>7}"
+        )
+    if not args.quick:
+        small = dict(rows)[15]
+        large = dict(rows)[1000]
+        print(f"target 15 demos <= 5 s: {small:.2f} s ({'ok' if small <= 5 else 'MISSED'})")
+        print(f"target 1000 demos <= 60 s: {large:.2f} s ({'ok' if large <= 60 else 'MISSED'})")
+    print("ratio = per-demo time relative to the smallest set (<= ~1 means at most linear)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,165 @@
+"""The one-line path from demonstrations to a proxy task: :func:`fit_task`."""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from sklearn.base import clone
+
+from sb3_swirl.demos import Demonstration, as_demonstrations
+from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
+from sb3_swirl.segmentation import TransitionStateClustering
+from swirl_wrappers import TaskModel
+
+Progress = Callable[[str], None]
+
+
+def _jsonable(value: Any) -> Any:
+    """A JSON-safe record of a hyperparameter value (callables by qualified name)."""
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    if isinstance(value, np.integer | np.floating):
+        return value.item()
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if callable(value):
+        func = getattr(value, "func", value)  # functools.partial
+        return f"{getattr(func, '__module__', '?')}.{getattr(func, '__qualname__', repr(func))}"
+    return repr(value)
+
+
+def _record(estimator: Any) -> dict[str, Any]:
+    params = {k: _jsonable(v) for k, v in estimator.get_params(deep=False).items()}
+    return {"class": type(estimator).__name__, "params": params}
+
+
+def _build(spec: Any, cls: type, kwargs: dict[str, Any], what: str) -> Any:
+    if spec is None:
+        return cls(**kwargs)
+    if isinstance(spec, dict):
+        return cls(**{**spec, **kwargs})
+    if kwargs:
+        raise TypeError(
+            f"keyword arguments {sorted(kwargs)} cannot be combined with a {what} instance; "
+            "set them on the instance"
+        )
+    return clone(spec)
+
+
+def fit_task(
+    demos: Any,
+    *,
+    dims: Any = None,
+    segmentation: TransitionStateClustering | dict[str, Any] | None = None,
+    reward: RewardLearner | dict[str, Any] | None = None,
+    random_state: int | None = None,
+    progress: Progress | bool | None = None,
+    **kwargs: Any,
+) -> TaskModel:
+    """Learn a SWIRL proxy task (regions and local rewards) from demonstrations.
+
+    Parameters
+    ----------
+    demos : anything :func:`sb3_swirl.demos.as_demonstrations` accepts
+        Lists of arrays, :class:`~sb3_swirl.demos.Demonstration`, imitation trajectories,
+        Minari episodes, or a ``.npz`` path.
+    dims : sequence of int, optional
+        Observation dimensions that form the state (e.g. ``(0, 1, 2)`` for x, y, theta);
+        ``None`` uses all of them. Recorded in the task so the runtime selects them too.
+    segmentation : TransitionStateClustering or dict, optional
+        The segmenter (cloned before fitting) or its keyword arguments.
+    reward : RewardLearner or dict, optional
+        The reward learner (cloned) or keyword arguments of
+        :class:`~sb3_swirl.rewards.QuadraticRewardLearner`.
+    random_state : int, optional
+        Seed of the segmenter (overrides its own ``random_state`` when given).
+    progress : callable or bool, optional
+        ``progress(message)`` is called at each stage (e.g. to update a status line);
+        ``True`` prints the stages.
+    **kwargs
+        Further hyperparameters, routed by name to the segmenter (e.g. ``window``,
+        ``indicator``, ``min_demo_fraction``) or the reward learner (e.g. ``metric``).
+
+    Returns
+    -------
+    TaskModel
+        With ``metadata`` recording the estimators and their parameters, ``dims``, the
+        number of demonstrations and their lengths.
+
+    Examples
+    --------
+    >>> from sb3_swirl.demos import make_piecewise_linear_demos
+    >>> demos, _ = make_piecewise_linear_demos(n_demos=8, random_state=0)
+    >>> task = fit_task(demos, window=3, random_state=0)
+    >>> task.n_segments
+    3
+    """
+    if progress is True:
+
+        def progress(message: str) -> None:
+            print(message)
+
+    report: Progress = progress if callable(progress) else (lambda message: None)
+
+    seg_params = set(inspect.signature(TransitionStateClustering).parameters)
+    reward_cls = type(reward) if isinstance(reward, RewardLearner) else QuadraticRewardLearner
+    reward_params = set(inspect.signature(reward_cls).parameters)
+    unknown = set(kwargs) - seg_params - reward_params
+    if unknown:
+        raise TypeError(
+            f"fit_task() got unexpected keyword arguments {sorted(unknown)}; segmentation takes "
+            f"{sorted(seg_params)}, the reward learner {sorted(reward_params)}"
+        )
+    segmenter = _build(
+        segmentation,
+        TransitionStateClustering,
+        {k: v for k, v in kwargs.items() if k in seg_params},
+        "segmentation",
+    )
+    learner = _build(
+        reward,
+        QuadraticRewardLearner,
+        {k: v for k, v in kwargs.items() if k in reward_params and k not in seg_params},
+        "reward",
+    )
+    if random_state is not None:
+        segmenter.set_params(random_state=random_state)
+
+    report("validating demonstrations")
+    demos = as_demonstrations(demos)
+    state_dim = demos[0].observations.shape[1]
+    if dims is not None:
+        dims = tuple(int(d) for d in np.atleast_1d(dims))
+        if not dims or min(dims) < 0 or max(dims) >= state_dim:
+            raise ValueError(
+                f"dims must be indices into the {state_dim} observation dimensions, got {dims}"
+            )
+        demos = [Demonstration(d.observations[:, dims], d.actions, d.rewards) for d in demos]
+
+    report(f"learning transition regions from {len(demos)} demonstrations")
+    segmenter.fit(demos)
+    report(f"learning local rewards for {len(segmenter.regions_)} segments")
+    learner.fit(demos, segmenter)
+    lengths = [len(d) for d in demos]
+    metadata = {
+        "fitted_by": "sb3_swirl.fit_task",
+        "n_demos": len(demos),
+        "demo_lengths": {"min": min(lengths), "max": max(lengths), "mean": float(np.mean(lengths))},
+        "state_dim": state_dim,
+        "dims": None if dims is None else list(dims),
+        "random_state": _jsonable(random_state),
+        "segmentation": _record(segmenter),
+        "reward": _record(learner),
+    }
+    task = TaskModel(
+        regions=segmenter.regions_,
+        rewards=learner.rewards_,
+        dims=dims,
+        features=segmenter.feature_map_,
+        metadata=metadata,
+    )
+    report(f"done: {task.n_segments} segments")
+    return task

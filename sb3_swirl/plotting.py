@@ -1,0 +1,181 @@
+"""Plots of a learned proxy task: segmented demonstrations (the paper's Fig. 13) and reward
+matrices (Fig. 14). Matplotlib only, safe under the Agg backend; every function returns the
+Figure and saves it when given ``path``.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.patches import Ellipse
+
+from sb3_swirl.demos import as_demonstrations
+from swirl_wrappers import TaskModel
+
+
+def _colors(n: int) -> list[Any]:
+    from matplotlib import colormaps
+
+    cmap = colormaps["tab10" if n <= 10 else "viridis"]
+    return [cmap(i if n <= 10 else i / max(n - 1, 1)) for i in range(n)]
+
+
+def _new_figure(figsize: tuple[float, float]) -> Figure:
+    # A bare Figure (no pyplot): no global state, no GUI backend, nothing to close.
+    return Figure(figsize=figsize, layout="constrained")
+
+
+def _finish(fig: Figure, path: str | os.PathLike | None) -> Figure:
+    if path is not None:
+        fig.savefig(path, dpi=120)
+    return fig
+
+
+def _axis_names(task: TaskModel) -> list[str]:
+    if task.features is not None:
+        return [f"feature {j}" for j in range(task.task_dim)]
+    if task.dims is not None:
+        return [f"obs[{d}]" for d in task.dims]
+    return [f"obs[{j}]" for j in range(task.task_dim)]
+
+
+def plot_segments(
+    demos: Any,
+    task: TaskModel,
+    dims: tuple[int, int] = (0, 1),
+    *,
+    ax: Axes | None = None,
+    path: str | os.PathLike | None = None,
+) -> Figure:
+    """Demonstrations coloured by segment, with the transition regions as ellipses.
+
+    Each demonstration is segmented with :meth:`TaskModel.segment_indices` (exactly as an agent
+    would be) and drawn in task space, projected onto two task-space axes; segment ``i`` and
+    the region ``rho_{i+1}`` it leads to share a colour; steps after the last region are grey.
+    A region's ellipse is the projection of its ellipsoid (sub-covariance of the two axes, same
+    threshold).
+
+    Parameters
+    ----------
+    demos : anything :func:`sb3_swirl.demos.as_demonstrations` accepts (full observations)
+    task : TaskModel
+    dims : (int, int)
+        Task-space axes to draw (after the task's ``dims`` selection and feature map).
+    ax : matplotlib Axes, optional
+        Draw into this axes instead of a new figure.
+    path : str or path-like, optional
+        Save the figure there.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    demos = as_demonstrations(demos)
+    a, b = (int(d) for d in dims)
+    if task.task_dim < 2 or not (0 <= a < task.task_dim and 0 <= b < task.task_dim and a != b):
+        raise ValueError(
+            f"dims must be two different task-space axes in 0..{task.task_dim - 1}, got {dims}"
+        )
+    if ax is None:
+        fig = _new_figure((6.4, 5.2))
+        ax = fig.add_subplot()
+    else:
+        fig = ax.figure
+    # Steps after the last region (index k) are grey: the demo went on past its final target.
+    colors = [*_colors(task.n_segments), (0.5, 0.5, 0.5, 1.0)]
+    for k, demo in enumerate(demos):
+        x = task.featurize(demo.observations)[:, [a, b]]
+        index = task.segment_indices(demo.observations)
+        # The step s_t -> s_{t+1} belongs to the segment index[t] (the one rewarding s_{t+1}).
+        seg_of_step = index[:-1]
+        lines = LineCollection(
+            np.stack([x[:-1], x[1:]], axis=1),
+            colors=[colors[i] for i in seg_of_step],
+            linewidths=1.5,
+            alpha=0.8,
+        )
+        ax.add_collection(lines)
+        ax.plot(*x[0], "o", color="black", ms=4, label="start" if k == 0 else None)
+        ax.plot(*x[-1], "x", color="black", ms=6, label="end" if k == 0 else None)
+    for i, region in enumerate(task.regions):
+        cov = region.covariance[np.ix_([a, b], [a, b])]
+        vals, vecs = np.linalg.eigh(cov)
+        radius = np.sqrt(region.threshold * np.maximum(vals, 0.0))
+        angle = np.degrees(np.arctan2(vecs[1, 1], vecs[0, 1]))
+        for fill in (True, False):
+            ax.add_patch(
+                Ellipse(
+                    region.mean[[a, b]],
+                    2 * radius[1],
+                    2 * radius[0],
+                    angle=angle,
+                    facecolor=colors[i] if fill else "none",
+                    edgecolor=colors[i],
+                    alpha=0.25 if fill else 1.0,
+                    lw=0 if fill else 2.0,
+                    label=None if fill else f"region {i + 1}",
+                )
+            )
+    for i in range(task.n_segments):
+        ax.plot([], [], color=colors[i], lw=2, label=f"segment {i + 1}")
+    if any((task.segment_indices(d.observations)[:-1] == task.n_segments).any() for d in demos):
+        ax.plot([], [], color=colors[-1], lw=2, label="after the last region")
+    names = _axis_names(task)
+    ax.set_xlabel(names[a])
+    ax.set_ylabel(names[b])
+    ax.set_title(f"{len(demos)} demonstrations, {task.n_segments} segments")
+    ax.autoscale_view()
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(loc="best", fontsize="small", ncols=2)
+    return _finish(fig, path)
+
+
+def plot_rewards(task: TaskModel, *, path: str | os.PathLike | None = None) -> Figure:
+    """The reward matrices ``Psi_i`` as heat maps, one panel per segment (the paper's Fig. 14).
+
+    A larger value means deviation along that axis (pair) is penalised more in that segment.
+
+    Parameters
+    ----------
+    task : TaskModel
+    path : str or path-like, optional
+        Save the figure there.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One heat-map axes per segment, each with its colour bar.
+    """
+    k = task.n_segments
+    names = _axis_names(task)
+    fig = _new_figure((3.2 * k + 0.6, 3.4))
+    axes = fig.subplots(1, k, squeeze=False)[0]
+    for i, (ax, reward) in enumerate(zip(axes, task.rewards, strict=True)):
+        weight = reward.weight
+        limit = float(np.abs(weight).max()) or 1.0
+        image = ax.imshow(weight, cmap="RdBu_r", vmin=-limit, vmax=limit)
+        ax.set_title(f"segment {i + 1} → region {i + 1}")
+        ticks = np.arange(weight.shape[0])
+        ax.set_xticks(ticks, names, rotation=45, ha="right", fontsize="small")
+        ax.set_yticks(ticks, names, fontsize="small")
+        if weight.shape[0] <= 6:
+            for r in ticks:
+                for c in ticks:
+                    value = weight[r, c]
+                    ax.text(
+                        c,
+                        r,
+                        f"{value:.2g}",
+                        ha="center",
+                        va="center",
+                        fontsize="small",
+                        color="white" if abs(value) > 0.6 * limit else "black",
+                    )
+        fig.colorbar(image, ax=ax, shrink=0.8)
+    fig.suptitle("Reward matrices Ψ_i (larger: deviation penalised more)")
+    return _finish(fig, path)

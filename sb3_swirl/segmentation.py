@@ -1,0 +1,793 @@
+"""Sequence learning (§5 of the paper, Algorithm 1): transition state clustering.
+
+A *transition indicator* marks candidate transitions in every demonstration; a Dirichlet-process
+GMM clusters the transition states (state and time); clusters that do not hold a transition from
+(almost) every demonstration are pruned; each survivor becomes an ellipsoidal
+:class:`swirl_wrappers.Region`, and the regions, ordered by time, define the Markov segmentation
+function of the proxy task.
+
+Three indicators are provided (§9.5 of the paper compares them) and any callable
+``f(states, random_state) -> list of index arrays`` can be plugged in:
+
+* :func:`gmm_indicator` -- GMM on windows normalised to their first state (the default, §5.3);
+* :func:`velocity_indicator` -- a change in the direction of velocity;
+* :func:`linear_indicator` -- a change of local linear dynamic regime.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2
+from sklearn.base import BaseEstimator
+from sklearn.decomposition import PCA
+from sklearn.kernel_approximation import Nystroem
+from sklearn.mixture import BayesianGaussianMixture, GaussianMixture
+from sklearn.utils import check_random_state
+from threadpoolctl import threadpool_limits
+
+from sb3_swirl.demos import as_demonstrations
+from swirl_wrappers import RBFFeatures, Region
+
+Indicator = Callable[[list[np.ndarray], Any], list[np.ndarray]]
+
+_CHUNK = 100_000  # rows per predict call: bounds peak memory on 1000 x 1000-step demo sets
+_SEED_MAX = np.iinfo(np.int32).max
+
+
+# ---------------------------------------------------------------------------- helpers
+def _scale(x: np.ndarray) -> np.ndarray:
+    """Per-column standard deviation, with constant columns given scale 1."""
+    std = x.std(axis=0)
+    return np.where(std > 1e-12 * max(1.0, float(np.abs(x).max(initial=0.0))), std, 1.0)
+
+
+def _local_maxima(score: np.ndarray, threshold: float, radius: int) -> np.ndarray:
+    """Indices of peaks of ``score`` above ``threshold``, at least ``radius`` apart (greedy NMS)."""
+    candidates = np.flatnonzero(score > threshold)
+    keep: list[int] = []
+    for j in candidates[np.argsort(-score[candidates], kind="stable")]:
+        if all(abs(j - k) > radius for k in keep):
+            keep.append(int(j))
+    return np.sort(np.asarray(keep, dtype=np.int64))
+
+
+def _interior(idx: np.ndarray, n_states: int) -> np.ndarray:
+    """Sorted unique indices without the first and last state (they never count as transitions)."""
+    idx = np.unique(np.asarray(idx, dtype=np.int64))
+    return idx[(idx > 0) & (idx < n_states - 1)]
+
+
+def _windows(x: np.ndarray, window: int) -> np.ndarray:
+    """Windows ``n_t = [s_{t-l+1} - s_{t-l}, ..., s_t - s_{t-l}]`` for ``t = l .. T`` (§5.3).
+
+    The leading ``s_{t-l} - s_{t-l} = 0`` is dropped: it carries no information.
+    """
+    n = len(x) - window
+    base = x[:n]
+    return np.concatenate([x[j : j + n] - base for j in range(1, window + 1)], axis=1)
+
+
+def _majority_filter(labels: np.ndarray, radius: int, n_labels: int) -> np.ndarray:
+    """Most frequent label in a window of ``2 radius + 1`` steps around each step.
+
+    Windows straddling a component boundary flip labels back and forth under noise; a
+    majority vote removes that flicker while keeping changes that persist (radius 1 is the
+    authors' single-step smoothing).
+    """
+    if radius < 1 or len(labels) < 3:
+        return labels
+    counts = np.zeros((len(labels) + 1, n_labels))
+    counts[1:] = np.cumsum(np.eye(n_labels)[labels], axis=0)
+    idx = np.arange(len(labels))
+    lo, hi = np.maximum(idx - radius, 0), np.minimum(idx + radius + 1, len(labels))
+    window = counts[hi] - counts[lo]
+    # Ties keep the current label, so the filter never invents a change.
+    window[idx, labels] += 0.5
+    return window.argmax(axis=1)
+
+
+# ---------------------------------------------------------------------------- indicators
+def gmm_indicator(
+    states: list[np.ndarray],
+    random_state: Any = None,
+    *,
+    window: int = 3,
+    n_components: int = 5,
+    max_samples: int = 20_000,
+    smooth: int | None = None,
+) -> list[np.ndarray]:
+    """Candidate transitions where the most likely GMM component of the window changes (§5.3).
+
+    Windows of ``window + 1`` states normalised to their first state are pooled over all
+    demonstrations and standardised; a GMM (``sklearn.mixture.GaussianMixture``, fitted on at most
+    ``max_samples`` windows drawn at random) labels every window with its most likely component.
+    Label flicker is smoothed away first by a majority vote over ``2 smooth + 1`` windows. A
+    label change between the windows ending at ``t - 1`` and ``t`` is reported at the middle
+    of the window, ``t - (window + 1) // 2``, which is where a switch of motion makes the label
+    change.
+
+    Parameters
+    ----------
+    states : list of arrays of shape (T_i + 1, p)
+    random_state : int, RandomState or None
+    window : int
+        Window length ``l`` (the authors used 2 to 8).
+    n_components : int
+        Number of GMM components (motion primitives); over-segmenting is fine, since
+        transitions not shared by the demonstrations are pruned later.
+    max_samples : int
+        At most this many windows are used to fit the GMM (all are labelled).
+    smooth : int, optional
+        Radius of the majority filter on the labels; default ``window``. ``1`` removes only
+        single-step flicker (``a b a``), as the authors' code did.
+
+    Returns
+    -------
+    list of int arrays
+        Candidate transition steps per demonstration.
+    """
+    rs = check_random_state(random_state)
+    smooth = window if smooth is None else int(smooth)
+    wins = [_windows(x, window) for x in states]
+    pooled = np.concatenate(wins)
+    scale = _scale(pooled)
+    sample = (
+        pooled
+        if len(pooled) <= max_samples
+        else pooled[rs.choice(len(pooled), max_samples, replace=False)]
+    )
+    n_distinct = len(np.unique(sample, axis=0))
+    if n_distinct < 2:
+        return [np.zeros(0, dtype=np.int64) for _ in states]
+    gmm = GaussianMixture(
+        n_components=min(n_components, n_distinct),
+        covariance_type="full",
+        reg_covar=1e-4,
+        random_state=rs.randint(_SEED_MAX),
+    ).fit(sample / scale)
+    labels = np.concatenate(
+        [gmm.predict(pooled[i : i + _CHUNK] / scale) for i in range(0, len(pooled), _CHUNK)]
+    )
+    out, start = [], 0
+    for x, w in zip(states, wins, strict=True):
+        lab = labels[start : start + len(w)].copy()
+        start += len(w)
+        lab = _majority_filter(lab, smooth, gmm.n_components)
+        change = np.flatnonzero(lab[1:] != lab[:-1]) + 1  # window index of the new label
+        out.append(_interior(change + window - (window + 1) // 2, len(x)))
+    return out
+
+
+def velocity_indicator(
+    states: list[np.ndarray],
+    random_state: Any = None,
+    *,
+    window: int = 3,
+    angle_threshold: float = math.pi / 4,
+    min_speed: float = 0.1,
+) -> list[np.ndarray]:
+    """Candidate transitions where the direction of velocity changes.
+
+    At every step ``t`` the mean velocity over the ``window`` steps before and after ``t`` is
+    compared; ``t`` is a candidate where the angle between the two exceeds ``angle_threshold``
+    (radians) and is a local maximum (peaks closer than ``window`` steps are merged). Steps
+    where either velocity is slower than ``min_speed`` times the median speed have no defined
+    direction and are skipped.
+
+    Parameters
+    ----------
+    states : list of arrays of shape (T_i + 1, p)
+    random_state : ignored (the indicator is deterministic)
+    window : int
+    angle_threshold : float
+    min_speed : float
+    """
+    del random_state
+    speeds = np.concatenate([np.linalg.norm(x[window:] - x[:-window], axis=1) for x in states])
+    floor = min_speed * float(np.median(speeds)) + 1e-12
+    out = []
+    for x in states:
+        if len(x) < 2 * window + 1:
+            out.append(np.zeros(0, dtype=np.int64))
+            continue
+        before = x[window:-window] - x[: -2 * window]
+        after = x[2 * window :] - x[window:-window]
+        nb, na = np.linalg.norm(before, axis=1), np.linalg.norm(after, axis=1)
+        valid = (nb > floor) & (na > floor)
+        cos = np.einsum("ij,ij->i", before, after) / np.where(valid, nb * na, 1.0)
+        angle = np.where(valid, np.arccos(np.clip(cos, -1.0, 1.0)), 0.0)
+        out.append(_interior(_local_maxima(angle, angle_threshold, window) + window, len(x)))
+    return out
+
+
+def _ridge_sse(
+    stats: tuple[np.ndarray, np.ndarray, np.ndarray],
+    lo: np.ndarray,
+    hi: np.ndarray,
+    penalty: np.ndarray,
+) -> np.ndarray:
+    """Residual sum of squares of ridge fits ``y ~ z B`` on the transitions ``lo .. hi - 1``.
+
+    ``stats`` holds cumulative sums of ``z z^T``, ``z y^T`` and ``|y|^2``, so every window costs
+    one small solve.
+    """
+    czz, czy, cyy = stats
+    zz, zy, yy = czz[hi] - czz[lo], czy[hi] - czy[lo], cyy[hi] - cyy[lo]
+    coef = np.linalg.solve(zz + penalty, zy)
+    fit = np.einsum("kij,kij->k", coef, zy)  # tr(B^T Z^T Y)
+    return np.maximum(yy - 2 * fit + np.einsum("kij,kil,klj->k", coef, zz, coef), 0.0)
+
+
+def linear_indicator(
+    states: list[np.ndarray],
+    random_state: Any = None,
+    *,
+    window: int | None = None,
+    threshold: float = 3.0,
+    ridge: float = 0.1,
+) -> list[np.ndarray]:
+    """Candidate transitions where the local linear dynamics change (a Chow-type test).
+
+    States are standardised over all demonstrations. At every step ``t`` an affine model
+    ``s_{t+1} - s_t = A s_t + b`` (ridge-regularised on ``A``) is fitted to the ``window``
+    transitions before ``t``, to the ``window`` after, and to both together; the score is the
+    relative increase of the residual when one model must explain both sides,
+    ``SSE_both - SSE_before - SSE_after``, in units of its expected size without a change
+    (``p (p + 1)`` coefficients times the residual variance per transition, one median
+    estimate over all demonstrations: a local estimate from ``2 window`` points is too noisy).
+    Peaks above ``threshold`` (at least ``window`` steps apart) are candidates. Sufficient
+    statistics are accumulated with cumulative sums, so the cost is linear in the number of
+    steps.
+
+    Parameters
+    ----------
+    states : list of arrays of shape (T_i + 1, p)
+    random_state : ignored (the indicator is deterministic)
+    window : int, optional
+        Transitions per side; default ``max(2 (p + 1), 8)``, enough to fit the ``p + 1``
+        coefficients per output with noise.
+    threshold : float
+    ridge : float
+        Ridge penalty on ``A`` (in standardised units); keeps fits on nearly collinear states
+        (straight-line motion) well posed.
+    """
+    del random_state
+    p = states[0].shape[1]
+    w = max(2 * (p + 1), 8) if window is None else int(window)
+    pooled = np.concatenate(states)
+    mean, scale = pooled.mean(axis=0), _scale(pooled)
+    penalty = ridge * np.diag(np.r_[np.ones(p), 0.0])
+    excess, residual = [], []
+    for raw in states:
+        x = (raw - mean) / scale
+        n = len(x) - 1  # transitions
+        if n < 2 * w:
+            excess.append(np.zeros(0))
+            continue
+        z = np.column_stack([x[:-1], np.ones(n)])
+        y = x[1:] - x[:-1]
+        stats = tuple(
+            np.concatenate([np.zeros((1, *a.shape[1:])), np.cumsum(a, axis=0)])
+            for a in (z[:, :, None] * z[:, None, :], z[:, :, None] * y[:, None, :], (y * y).sum(1))
+        )
+        t = np.arange(w, n - w + 1)
+        left, right = _ridge_sse(stats, t - w, t, penalty), _ridge_sse(stats, t, t + w, penalty)
+        both = _ridge_sse(stats, t - w, t + w, penalty)
+        excess.append(both - left - right)
+        residual.append((left + right) / (2 * w * p))
+    # One noise level for all demonstrations: a local estimate from 2w points is too noisy.
+    noise = float(np.median(np.concatenate(residual))) if residual else 0.0
+    noise = max(noise, 1e-12 * float(np.mean(pooled.var(axis=0) / scale**2)), 1e-300)
+    out = []
+    for raw, exc in zip(states, excess, strict=True):
+        score = exc / (noise * p * (p + 1))
+        out.append(_interior(_local_maxima(score, threshold, w) + w, len(raw)))
+    return out
+
+
+_INDICATORS = {"gmm", "velocity", "linear"}
+
+
+# ---------------------------------------------------------------------------- regions
+def segment_boundaries(
+    states: np.ndarray, regions: Sequence[Region], times: np.ndarray | None = None
+) -> np.ndarray:
+    """Run the Markov segmentation function along one trajectory in task space.
+
+    Parameters
+    ----------
+    states : array of shape (T + 1, p)
+        Task-space states (after ``dims`` selection and the feature map).
+    regions : sequence of Region
+    times : array of shape (T + 1,), optional
+        Time of every state (default ``0 .. T``), used by regions with time bounds.
+
+    Returns
+    -------
+    int array of shape (k,)
+        ``out[i]`` is the step at which region ``i`` is reached, checking region ``i`` only
+        after region ``i - 1`` was reached at an earlier step (exactly as
+        :meth:`swirl_wrappers.TaskModel.segment_indices` advances); ``-1`` if never reached.
+    """
+    times = np.arange(len(states), dtype=np.float64) if times is None else times
+    out = np.full(len(regions), -1, dtype=np.int64)
+    start = 0
+    for i, region in enumerate(regions):
+        hit = np.flatnonzero(region.contains(states[start:], times[start:]))
+        if hit.size == 0:
+            break
+        out[i] = start + hit[0]
+        start = out[i] + 1
+    return out
+
+
+def _separation_scale(a: Region, b: Region) -> float:
+    """Largest factor ``s <= 1`` such that a hyperplane separates the two scaled ellipsoids.
+
+    The ellipsoid ``{x : (x - m)^T P (x - m) <= r^2}`` has support function
+    ``h(u) = m.u + r ||Sigma^{1/2} u||``; two ellipsoids are disjoint if some normal ``u`` gives
+    ``(m_b - m_a).u > r_a ||Sigma_a^{1/2} u|| + r_b ||Sigma_b^{1/2} u||``. Four normals are
+    tried: the line between the centres, each region's Mahalanobis gradient at the other's
+    centre and the pooled (Fisher) direction. Any one that separates proves disjointness, so
+    the returned factor is a sufficient (conservative) condition.
+    """
+    delta = b.mean - a.mean
+    normals = [
+        delta,
+        a.precision @ delta,
+        b.precision @ delta,
+        np.linalg.solve(a.covariance + b.covariance, delta),
+    ]
+    best = 0.0
+    ra, rb = math.sqrt(a.threshold), math.sqrt(b.threshold)
+    for u in normals:
+        gap = float(delta @ u)
+        spread = ra * math.sqrt(max(u @ a.covariance @ u, 0.0)) + rb * math.sqrt(
+            max(u @ b.covariance @ u, 0.0)
+        )
+        if gap > 0:
+            best = max(best, gap / spread if spread > 0 else math.inf)
+    return min(1.0, best)
+
+
+def _make_disjoint(regions: list[Region], margin: float = 0.99) -> list[Region]:
+    """Shrink radii (thresholds) so that every pair of regions is separated by a hyperplane.
+
+    For each pair the largest common radius factor that separates them is computed
+    (:func:`_separation_scale`); each region is then scaled by ``margin`` times the smallest
+    factor over its pairs. Shrinking a region only helps every other pair, so the result is
+    pairwise disjoint. Regions whose time windows do not intersect are disjoint already.
+    """
+    factors = np.ones(len(regions))
+    for i in range(len(regions)):
+        for j in range(i + 1, len(regions)):
+            if _apart_in_time(regions[i], regions[j]):
+                continue
+            s = _separation_scale(regions[i], regions[j])
+            if s < 1.0:
+                factors[i] = min(factors[i], margin * s)
+                factors[j] = min(factors[j], margin * s)
+    return [
+        r
+        if f >= 1.0
+        else Region(r.mean, r.covariance, r.threshold * f**2, time_bounds=r.time_bounds)
+        for r, f in zip(regions, factors, strict=True)
+    ]
+
+
+def _apart_in_time(a: Region, b: Region) -> bool:
+    """Whether the regions' time windows do not intersect (then they are disjoint anyway)."""
+    if a.time_bounds is None or b.time_bounds is None:
+        return False
+    return a.time_bounds[1] < b.time_bounds[0] or b.time_bounds[1] < a.time_bounds[0]
+
+
+def _overlaps(a: Region, b: Region) -> bool:
+    """Whether either centre lies inside the other region (the two mark the same place)."""
+    if _apart_in_time(a, b):
+        return False
+    return bool(a.contains(b.mean) or b.contains(a.mean))
+
+
+class TransitionStateClustering(BaseEstimator):
+    """Learn the ordered transition regions of a task from demonstrations (§5, Algorithm 1).
+
+    1. Optionally map states through an approximate RBF kernel PCA (§5.3; Nyström on
+       ``n_landmarks`` seeded landmarks, then PCA to ``n_kernel_components`` dimensions); the
+       map is kept as a :class:`swirl_wrappers.RBFFeatures` (``feature_map_``) so the runtime
+       evaluates it with numpy alone, and regions live in that feature space.
+    2. A transition indicator marks candidate transitions in every demonstration
+       (``transitions_``).
+    3. A Dirichlet-process GMM (``BayesianGaussianMixture``, concentration ``concentration``,
+       on standardised features) clusters the candidate transition states, then a second one
+       clusters each state cluster by time; the time split is kept only when every part
+       holds enough demonstrations (a place visited more than once), since otherwise
+       demonstrators' differing speeds would fragment one transition.
+    4. Clusters holding transitions from fewer than ``ceil(min_demo_fraction * n_demos)``
+       demonstrations are pruned. From each survivor one representative transition per
+       demonstration is kept (the most probable member), which discards stray indicator
+       noise merged into the cluster.
+    5. Each survivor becomes a :class:`swirl_wrappers.Region`: the mean and regularised
+       covariance of its representative states and the chi-square quantile of ``confidence``.
+       With ``include_goal`` a final *goal* region is added from the demonstrations' final
+       states: the last state is never a transition, yet the last segment needs a target.
+       Regions are ordered by median transition time (the goal last). A transition region
+       whose centre lies inside the goal region, or inside an earlier region, marks the same
+       place and is dropped (without time windows the later one could never be told apart).
+       Finally thresholds are shrunk until every pair of regions is separated by a hyperplane
+       (a sufficient condition for disjoint ellipsoids; see ``_make_disjoint``).
+    6. ``segments_`` runs the resulting Markov segmentation function along every demonstration.
+
+    Parameters
+    ----------
+    indicator : {"gmm", "velocity", "linear"} or callable, default "gmm"
+        Transition indicator. A callable ``f(states, random_state) -> list of int arrays`` gets
+        the list of task-space state arrays (T_i + 1, p) and an int seed and returns candidate
+        transition steps per demonstration (use ``functools.partial`` of :func:`gmm_indicator`,
+        :func:`velocity_indicator` or :func:`linear_indicator` to change their settings).
+    window : int, default 3
+        Window length of the indicators; every demonstration needs ``window + 2`` states.
+    n_indicator_components : int, default 5
+        GMM components of the ``"gmm"`` indicator.
+    max_indicator_samples : int, default 20000
+        Windows (drawn at random) used to fit the indicator GMM; all windows are labelled.
+    kernel : {None, "rbf"}, default None
+        Featurise states with an approximate RBF kernel PCA before windowing.
+    kernel_sigma : float, default 0.1
+        RBF bandwidth, ``gamma = 1 / (2 sigma^2)`` (the paper uses 0.1 for the acrobot,
+        Appendix B.3). Choose it on the scale of the states: with a bandwidth much smaller
+        than the distance between states, most states map to nearly the same features.
+    n_kernel_components : int, default 5
+        Dimension ``p'`` of the kernel PCA features.
+    n_landmarks : int, default 200
+        Nyström landmarks (a seeded sample of the demonstration states).
+    n_regions_max : int, default 10
+        Truncation level of the Dirichlet process (upper bound on the number of clusters).
+    concentration : float, default 0.1
+        Dirichlet-process concentration (the paper's "prior weight of 0.1").
+    min_demo_fraction : float, default 1.0
+        A cluster survives when it holds transitions from at least
+        ``ceil(min_demo_fraction * n_demos)`` demonstrations (1.0: all, as in Algorithm 1).
+    confidence : float, default 0.95
+        Chi-square confidence level of the region ellipsoids (before shrinking for
+        disjointness).
+    covariance_type : {"diag", "tied", "spherical", "full"}, default "diag"
+        Covariance of the DP-GMM components; with few transition points per cluster full
+        covariances over-split.
+    reg_covar : float, default 1e-3
+        Added to each region covariance, relative to the variance of all demonstration states
+        along each axis; keeps regions built from few or identical points well posed.
+    use_time : bool, default False
+        Give each region a time window (the range of its transition times, widened on each
+        side by that range or ``window`` steps, whichever is larger). Off by default: an RL
+        agent early in training is much slower than the demonstrator and would miss regions
+        that expire.
+    include_goal : bool, default True
+        Add the goal region built from the demonstrations' final states.
+    random_state : int, RandomState or None
+        Seeds every random choice (landmarks, PCA, indicator GMM, DP-GMM).
+
+    Attributes
+    ----------
+    regions_ : list of Region
+        The ordered regions (task space).
+    transitions_ : list of int arrays
+        Candidate transition steps per demonstration (the indicator's output).
+    segments_ : list of int arrays of shape (n_regions,)
+        Per demonstration, the step at which each region is reached under the Markov
+        segmentation function (``-1`` when not reached).
+    region_transitions_ : list of list of (demo, step)
+        The representative transitions each transition region was built from (empty for the
+        goal region).
+    feature_map_ : RBFFeatures or None
+        The kernel feature map when ``kernel="rbf"``.
+    n_demos_ : int
+    state_dim_ : int
+        Dimension of the states given to ``fit``.
+
+    Examples
+    --------
+    >>> from sb3_swirl.demos import make_piecewise_linear_demos
+    >>> demos, switches = make_piecewise_linear_demos(n_demos=8, random_state=0)
+    >>> tsc = TransitionStateClustering(random_state=0).fit(demos)
+    >>> len(tsc.regions_)  # two corners and the goal
+    3
+    """
+
+    def __init__(
+        self,
+        indicator: str | Indicator = "gmm",
+        window: int = 3,
+        n_indicator_components: int = 5,
+        max_indicator_samples: int = 20_000,
+        kernel: str | None = None,
+        kernel_sigma: float = 0.1,
+        n_kernel_components: int = 5,
+        n_landmarks: int = 200,
+        n_regions_max: int = 10,
+        concentration: float = 0.1,
+        min_demo_fraction: float = 1.0,
+        confidence: float = 0.95,
+        covariance_type: str = "diag",
+        reg_covar: float = 1e-3,
+        use_time: bool = False,
+        include_goal: bool = True,
+        random_state: int | np.random.RandomState | None = None,
+    ) -> None:
+        self.indicator = indicator
+        self.window = window
+        self.n_indicator_components = n_indicator_components
+        self.max_indicator_samples = max_indicator_samples
+        self.kernel = kernel
+        self.kernel_sigma = kernel_sigma
+        self.n_kernel_components = n_kernel_components
+        self.n_landmarks = n_landmarks
+        self.n_regions_max = n_regions_max
+        self.concentration = concentration
+        self.min_demo_fraction = min_demo_fraction
+        self.confidence = confidence
+        self.covariance_type = covariance_type
+        self.reg_covar = reg_covar
+        self.use_time = use_time
+        self.include_goal = include_goal
+        self.random_state = random_state
+
+    # ------------------------------------------------------------------ validation
+    def _check_params(self) -> None:
+        if not (callable(self.indicator) or self.indicator in _INDICATORS):
+            raise ValueError(
+                f"indicator must be one of {sorted(_INDICATORS)} or a callable, "
+                f"got {self.indicator!r}"
+            )
+        for name in (
+            "window",
+            "n_indicator_components",
+            "max_indicator_samples",
+            "n_kernel_components",
+            "n_landmarks",
+            "n_regions_max",
+        ):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if self.kernel not in (None, "rbf"):
+            raise ValueError(f"kernel must be None or 'rbf', got {self.kernel!r}")
+        checks = {
+            "kernel_sigma": self.kernel_sigma > 0,
+            "concentration": self.concentration > 0,
+            "min_demo_fraction": 0 < self.min_demo_fraction <= 1,
+            "confidence": 0 < self.confidence < 1,
+            "reg_covar": self.reg_covar > 0,
+        }
+        ranges = {"min_demo_fraction": "in (0, 1]", "confidence": "in (0, 1)"}
+        for name, ok in checks.items():
+            if not ok:
+                raise ValueError(
+                    f"{name} must be {ranges.get(name, 'positive')}, got {getattr(self, name)!r}"
+                )
+        if self.covariance_type not in ("diag", "tied", "spherical", "full"):
+            raise ValueError(
+                "covariance_type must be 'diag', 'tied', 'spherical' or 'full', "
+                f"got {self.covariance_type!r}"
+            )
+
+    # ------------------------------------------------------------------ fitting
+    def fit(self, demos: Any, y: None = None) -> TransitionStateClustering:
+        """Learn the regions from demonstrations.
+
+        Parameters
+        ----------
+        demos : anything :func:`sb3_swirl.demos.as_demonstrations` accepts
+            At least two demonstrations, each with at least ``window + 2`` states.
+        y : ignored
+
+        Returns
+        -------
+        self
+        """
+        self._check_params()
+        demos = as_demonstrations(demos, window=self.window)
+        # The work is many small (p x p) factorisations, where BLAS threads only add
+        # synchronisation overhead (4x slower measured on 2 busy cores).
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._fit(demos)
+
+    def _fit(self, demos: list) -> TransitionStateClustering:
+        rs = check_random_state(self.random_state)
+        seeds = rs.randint(_SEED_MAX, size=3)
+        states = [d.observations for d in demos]
+        self.n_demos_ = len(states)
+        self.state_dim_ = states[0].shape[1]
+        self.feature_map_ = (
+            self._fit_feature_map(states, seeds[0]) if self.kernel == "rbf" else None
+        )
+        x = states if self.feature_map_ is None else [self.feature_map_(s) for s in states]
+        self.transitions_ = self._indicate(x, int(seeds[1]))
+
+        pooled = np.concatenate(x)
+        reg = self.reg_covar * np.diag(_scale(pooled) ** 2)
+        threshold = float(chi2.ppf(self.confidence, df=pooled.shape[1]))
+        candidates = self._cluster(x, int(seeds[2]))
+        regions, members = [], []
+        for times, points, reps in candidates:
+            region = self._region(points, reg, threshold, times)
+            regions.append(region)
+            members.append(reps)
+        if self.include_goal:
+            goal = self._region(
+                np.array([s[-1] for s in x]),
+                reg,
+                threshold,
+                np.array([len(s) - 1 for s in x], dtype=np.float64),
+            )
+            keep = [i for i, r in enumerate(regions) if not _overlaps(r, goal)]
+            regions = [regions[i] for i in keep] + [goal]
+            members = [members[i] for i in keep] + [[]]
+        kept: list[int] = []
+        for i, region in enumerate(regions):
+            if not any(_overlaps(region, regions[j]) for j in kept):
+                kept.append(i)
+        if not kept:
+            raise ValueError(
+                f"no transition region is shared by at least "
+                f"{self._min_demos(len(states))} of the {len(states)} demonstrations; "
+                "lower min_demo_fraction, change the indicator or window, or set "
+                "include_goal=True"
+            )
+        self.regions_ = _make_disjoint([regions[i] for i in kept])
+        self.region_transitions_ = [members[i] for i in kept]
+        self.segments_ = [segment_boundaries(s, self.regions_) for s in x]
+        return self
+
+    def transform_states(self, states: np.ndarray) -> np.ndarray:
+        """Map states (the same columns as given to ``fit``) into the regions' task space."""
+        states = np.asarray(states, dtype=np.float64)
+        return states if self.feature_map_ is None else self.feature_map_(states)
+
+    def _min_demos(self, n: int) -> int:
+        return max(1, math.ceil(self.min_demo_fraction * n - 1e-9))
+
+    def _fit_feature_map(self, states: list[np.ndarray], seed: int) -> RBFFeatures:
+        rs = check_random_state(seed)
+        pooled = np.concatenate(states)
+        if len(pooled) > self.max_indicator_samples:
+            pooled = pooled[rs.choice(len(pooled), self.max_indicator_samples, replace=False)]
+        distinct = np.unique(pooled, axis=0)
+        gamma = 1.0 / (2.0 * self.kernel_sigma**2)
+        nystroem = Nystroem(
+            kernel="rbf",
+            gamma=gamma,
+            n_components=min(self.n_landmarks, len(distinct)),
+            random_state=rs.randint(_SEED_MAX),
+        ).fit(distinct)
+        phi = nystroem.transform(pooled)
+        n_out = min(self.n_kernel_components, phi.shape[1], len(pooled))
+        pca = PCA(n_components=n_out, random_state=rs.randint(_SEED_MAX)).fit(phi)
+        projection = nystroem.normalization_.T @ pca.components_.T
+        return RBFFeatures(
+            landmarks=nystroem.components_,
+            gamma=gamma,
+            projection=projection,
+            offset=pca.mean_ @ pca.components_.T,
+        )
+
+    def _indicate(self, x: list[np.ndarray], seed: int) -> list[np.ndarray]:
+        if self.indicator == "gmm":
+            found = gmm_indicator(
+                x,
+                seed,
+                window=self.window,
+                n_components=self.n_indicator_components,
+                max_samples=self.max_indicator_samples,
+            )
+        elif self.indicator == "velocity":
+            found = velocity_indicator(x, seed, window=self.window)
+        elif self.indicator == "linear":
+            found = linear_indicator(x, seed)
+        else:
+            found = self.indicator(x, seed)
+        if not isinstance(found, Sequence) or len(found) != len(x):
+            raise ValueError(
+                f"the transition indicator must return one index array per demonstration "
+                f"({len(x)}), got {type(found).__name__}"
+            )
+        out = []
+        for i, idx in enumerate(found):
+            idx = np.asarray(idx)
+            if idx.size and (idx.dtype.kind not in "iu" or idx.ndim != 1):
+                raise ValueError(
+                    f"the transition indicator returned non-integer or non-1-D indices for "
+                    f"demo {i}: dtype {idx.dtype}, shape {idx.shape}"
+                )
+            out.append(_interior(idx.reshape(-1), len(x[i])))
+        return out
+
+    def _dpgmm_labels(self, feats: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """Labels and responsibilities of a Dirichlet-process GMM on standardised features."""
+        feats = (feats - feats.mean(axis=0)) / _scale(feats)
+        n_distinct = len(np.unique(feats, axis=0))
+        if n_distinct < 2:
+            return np.zeros(len(feats), dtype=np.int64), np.ones((len(feats), 1))
+        dpgmm = BayesianGaussianMixture(
+            n_components=min(self.n_regions_max, n_distinct),
+            covariance_type=self.covariance_type,
+            weight_concentration_prior_type="dirichlet_process",
+            weight_concentration_prior=self.concentration,
+            reg_covar=1e-3,
+            max_iter=500,
+            random_state=seed,
+        ).fit(feats)
+        proba = dpgmm.predict_proba(feats)
+        return proba.argmax(axis=1), proba
+
+    def _cluster(
+        self, x: list[np.ndarray], seed: int
+    ) -> list[tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]]:
+        """DP-GMM over the candidate transition states, then over time, then pruning.
+
+        As in the authors' TSC code, transition states are clustered first in state, then in
+        time within each state cluster. A state cluster is split by time only when every time
+        sub-cluster survives pruning on its own (a place all demonstrations visit more than
+        once); otherwise demonstrators' differing speeds would fragment one transition into
+        sub-clusters each holding part of the demonstrations.
+
+        Returns (times, states, [(demo, step), ...]) of one representative transition per
+        demonstration (its most probable member) for every surviving cluster, ordered by
+        median time.
+        """
+        owner = np.concatenate(
+            [np.full(len(t), i, dtype=np.int64) for i, t in enumerate(self.transitions_)]
+        )
+        steps = np.concatenate(self.transitions_).astype(np.int64)
+        if len(steps) < 2:
+            return []
+        points = np.concatenate([s[t] for s, t in zip(x, self.transitions_, strict=True)])
+        need = self._min_demos(len(x))
+        rs = check_random_state(seed)
+        state_labels, state_proba = self._dpgmm_labels(points, rs.randint(_SEED_MAX))
+        found = []
+        for c in np.unique(state_labels):
+            members = np.flatnonzero(state_labels == c)
+            if len(np.unique(owner[members])) < need:
+                continue
+            groups = [(members, state_proba[members, c])]
+            if len(members) > 1:
+                time_labels, time_proba = self._dpgmm_labels(
+                    steps[members, None].astype(np.float64), rs.randint(_SEED_MAX)
+                )
+                sub = [
+                    (members[time_labels == u], time_proba[time_labels == u, u])
+                    for u in np.unique(time_labels)
+                ]
+                if len(sub) > 1 and all(len(np.unique(owner[m])) >= need for m, _ in sub):
+                    groups = sub
+            for group, score in groups:
+                reps = []
+                for demo in np.unique(owner[group]):
+                    mine = owner[group] == demo
+                    reps.append(int(group[mine][np.argmax(score[mine])]))
+                reps = np.asarray(reps)
+                found.append(
+                    (
+                        steps[reps].astype(np.float64),
+                        points[reps],
+                        [(int(owner[r]), int(steps[r])) for r in reps],
+                    )
+                )
+        found.sort(key=lambda item: float(np.median(item[0])))
+        return found
+
+    def _region(
+        self, points: np.ndarray, reg: np.ndarray, threshold: float, times: np.ndarray
+    ) -> Region:
+        mean = points.mean(axis=0)
+        cov = np.cov(points, rowvar=False).reshape(len(mean), len(mean)) if len(points) > 1 else 0
+        bounds = None
+        if self.use_time:
+            spread = max(float(times.max() - times.min()), float(self.window))
+            bounds = (max(0.0, float(times.min()) - spread), float(times.max()) + spread)
+        return Region(mean, cov + reg, threshold, time_bounds=bounds)

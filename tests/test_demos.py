@@ -1,0 +1,181 @@
+"""Demonstration conversion, validation and (de)serialisation."""
+
+from __future__ import annotations
+
+import importlib.util
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from sb3_swirl.demos import (
+    Demonstration,
+    as_demonstrations,
+    load_demos,
+    make_piecewise_linear_demos,
+    save_demos,
+    to_imitation,
+    to_minari,
+)
+
+
+def _arrays(n=3, lengths=(10, 12, 15), d=2, seed=0):
+    rng = np.random.default_rng(seed)
+    return [rng.normal(size=(lengths[i % len(lengths)], d)) for i in range(n)]
+
+
+def test_arrays_become_float64_demonstrations_with_ragged_lengths():
+    arrays = [a.astype(np.float32) for a in _arrays()]
+    demos = as_demonstrations(arrays)
+    assert [len(d) for d in demos] == [9, 11, 14]
+    for demo, arr in zip(demos, arrays, strict=True):
+        assert demo.observations.dtype == np.float64
+        np.testing.assert_array_equal(demo.observations, arr.astype(np.float64))
+        assert demo.actions is None and demo.rewards is None
+
+
+def test_three_d_array_is_split_into_demonstrations():
+    data = np.arange(2 * 5 * 3, dtype=float).reshape(2, 5, 3)
+    demos = as_demonstrations(data)
+    assert len(demos) == 2
+    np.testing.assert_array_equal(demos[1].observations, data[1])
+
+
+def test_imitation_style_and_minari_style_objects_are_read_by_their_fields():
+    obs = _arrays()
+    traj = [
+        SimpleNamespace(
+            obs=o, acts=np.arange(len(o) - 1), rews=np.ones(len(o) - 1), infos=None, terminal=True
+        )
+        for o in obs
+    ]
+    episodes = [
+        SimpleNamespace(
+            observations=o, actions=np.zeros((len(o) - 1, 2)), rewards=np.zeros(len(o) - 1)
+        )
+        for o in obs
+    ]
+    mappings = [{"observations": o, "actions": np.arange(len(o) - 1)} for o in obs]
+    for source in (traj, episodes, mappings):
+        demos = as_demonstrations(source)
+        assert [len(d) for d in demos] == [len(o) - 1 for o in obs]
+        assert demos[0].actions is not None
+    assert as_demonstrations(traj)[0].actions.dtype.kind == "i"  # discrete actions keep dtype
+    np.testing.assert_array_equal(as_demonstrations(traj)[2].rewards, np.ones(14))
+
+
+def test_real_imitation_trajectories_round_trip():
+    from imitation.data.types import Trajectory, TrajectoryWithRew
+
+    rng = np.random.default_rng(1)
+    demos = [
+        Demonstration(rng.normal(size=(n + 1, 3)), rng.integers(0, 4, size=n), rng.normal(size=n))
+        for n in (6, 9)
+    ]
+    trajs = to_imitation(demos)
+    assert all(isinstance(t, TrajectoryWithRew) and t.terminal for t in trajs)
+    back = as_demonstrations(trajs)
+    for a, b in zip(demos, back, strict=True):
+        np.testing.assert_array_equal(a.observations, b.observations)
+        np.testing.assert_array_equal(a.actions, b.actions)
+        np.testing.assert_array_equal(a.rewards, b.rewards)
+    no_rew = to_imitation([Demonstration(d.observations, d.actions) for d in demos])
+    assert type(no_rew[0]) is Trajectory
+    with pytest.raises(ValueError, match="demo 1 has no actions"):
+        to_imitation([demos[0], Demonstration(demos[1].observations)])
+
+
+def test_npz_round_trip_is_exact(tmp_path):
+    rng = np.random.default_rng(2)
+    demos = [
+        Demonstration(rng.normal(size=(8, 2))),
+        Demonstration(rng.normal(size=(5, 2)), np.array([0, 3, 1, 2], dtype=np.int64)),
+        Demonstration(rng.normal(size=(4, 2)), rng.normal(size=(3, 2)), rng.normal(size=3)),
+    ]
+    path = tmp_path / "demos.npz"
+    save_demos(demos, path)
+    for loaded in (load_demos(path), as_demonstrations(path), as_demonstrations(str(path))):
+        assert len(loaded) == 3
+        for a, b in zip(demos, loaded, strict=True):
+            np.testing.assert_array_equal(a.observations, b.observations)
+            for x, y in ((a.actions, b.actions), (a.rewards, b.rewards)):
+                assert (x is None) == (y is None)
+                if x is not None:
+                    assert x.dtype == y.dtype
+                    np.testing.assert_array_equal(x, y)
+
+
+def test_load_rejects_foreign_and_missing_files(tmp_path):
+    path = tmp_path / "other.npz"
+    np.savez(path, x=np.zeros(3))
+    with pytest.raises(ValueError, match="not an sb3-swirl demonstration file"):
+        load_demos(path)
+    with pytest.raises(ValueError, match="cannot read demonstrations"):
+        load_demos(tmp_path / "missing.npz")
+
+
+@pytest.mark.skipif(importlib.util.find_spec("minari") is not None, reason="error path only")
+def test_to_minari_without_minari_says_how_to_install():
+    with pytest.raises(ImportError, match=r'pip install "sb3-swirl\[minari\]"'):
+        to_minari(_arrays(), "swirl/test/demo-v0")
+
+
+def _bad(index, array):
+    good = _arrays(4)
+    good[index] = array
+    return good
+
+
+@pytest.mark.parametrize(
+    ("data", "match"),
+    [
+        ([], "no demonstrations"),
+        (_arrays(1), "at least 2 demonstrations, got 1"),
+        (_bad(2, np.array([["a", "b"]] * 5)), "demo 2: observations have non-numeric dtype"),
+        (
+            _bad(1, np.where(np.arange(20).reshape(10, 2) == 7, np.nan, 1.0)),
+            r"demo 1: observations contain NaN or inf \(first at step 3\)",
+        ),
+        (_bad(3, np.full((6, 2), np.inf)), r"demo 3: .*NaN or inf \(first at step 0\)"),
+        (_bad(2, np.zeros((9, 3))), "demo 2 has state dimension 3 but demo 0 has 2"),
+        (_bad(1, np.zeros(9)), r"demo 1: observations must be 2-D .*shape \(9,\)"),
+        (_bad(0, np.zeros((3, 2, 2))), "demo 0: observations must be 2-D"),
+        (_bad(3, [[0.0, 1.0], [1.0]]), "demo 3: observations cannot be read"),
+        (
+            _bad(0, {"observations": np.zeros((5, 2)), "actions": np.zeros(5)}),
+            r"demo 0: actions must have length T = 4",
+        ),
+        (
+            _bad(1, {"obs": np.zeros((5, 2)), "acts": np.zeros(4), "rews": np.zeros(3)}),
+            r"demo 1: rewards must have shape",
+        ),
+        (_bad(2, {"observations": {"a": np.zeros((5, 2))}}), "demo 2: observations are a dict"),
+        (_bad(2, np.zeros((1, 2))), "demo 2: needs at least 2 states"),
+    ],
+)
+def test_malformed_input_names_the_demo_and_problem(data, match):
+    with pytest.raises(ValueError, match=match):
+        as_demonstrations(data)
+
+
+def test_demo_shorter_than_window_reports_lengths():
+    data = _arrays(3, lengths=(20, 4, 20))
+    with pytest.raises(ValueError, match="demo 1 is shorter than the window: it has 4 states"):
+        as_demonstrations(data, window=3)
+    assert len(as_demonstrations(data, window=2)) == 3  # 4 states suffice for window 2
+
+
+def test_not_a_sequence_is_rejected():
+    with pytest.raises(ValueError, match="expected a sequence"):
+        as_demonstrations(Demonstration(np.zeros((5, 2))))
+    with pytest.raises(ValueError, match=r"shape \(n_demos, T\+1, d\)"):
+        as_demonstrations(np.zeros((5, 2)))
+
+
+def test_piecewise_linear_demos_switch_where_the_direction_changes():
+    demos, switches = make_piecewise_linear_demos(n_demos=4, n_phases=3, noise=0.0, random_state=3)
+    assert len({len(d) for d in demos}) > 1  # ragged
+    for demo, sw in zip(demos, switches, strict=True):
+        v = np.diff(demo.observations, axis=0)
+        changes = np.flatnonzero(np.linalg.norm(np.diff(v, axis=0), axis=1) > 1e-9) + 1
+        np.testing.assert_array_equal(changes, sw)

@@ -1,0 +1,169 @@
+"""fit_task: the one-line path from demonstrations to a TaskModel."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from sb3_swirl.demos import Demonstration, make_piecewise_linear_demos, save_demos, to_imitation
+from sb3_swirl.fitting import fit_task
+from sb3_swirl.segmentation import TransitionStateClustering
+from swirl_wrappers import TaskModel
+
+
+@pytest.fixture(scope="module")
+def demos():
+    return make_piecewise_linear_demos(n_demos=8, noise=0.1, random_state=4)[0]
+
+
+def _same_task(a: TaskModel, b: TaskModel, rtol: float = 0.0) -> None:
+    assert a.n_segments == b.n_segments
+    for ra, rb in zip(a.regions, b.regions, strict=True):
+        np.testing.assert_allclose(ra.mean, rb.mean, rtol=rtol, atol=0)
+        np.testing.assert_allclose(ra.covariance, rb.covariance, rtol=rtol, atol=0)
+        assert ra.threshold == pytest.approx(rb.threshold, rel=rtol, abs=0)
+    for wa, wb in zip(a.rewards, b.rewards, strict=True):
+        np.testing.assert_allclose(wa.target, wb.target, rtol=rtol, atol=0)
+        np.testing.assert_allclose(wa.weight, wb.weight, rtol=rtol, atol=0)
+
+
+def test_fit_task_returns_a_task_whose_segmentation_matches_the_segmenter(demos):
+    task = fit_task(demos, random_state=0)
+    tsc = TransitionStateClustering(random_state=0).fit(demos)
+    assert isinstance(task, TaskModel) and task.n_segments == 3
+    for demo, segs in zip(demos, tsc.segments_, strict=True):
+        index = task.segment_indices(demo.observations)
+        np.testing.assert_array_equal(np.flatnonzero(np.diff(np.r_[0, index])), segs)
+        assert index[-1] == task.n_segments
+        rewards = task.reward(demo.observations[1:], index[:-1])
+        assert np.all(np.isfinite(rewards)) and np.all(rewards <= 0)
+
+
+def test_json_round_trip_keeps_segmentation_and_rewards(demos, tmp_path):
+    task = fit_task(demos, random_state=0)
+    again = TaskModel.from_json(task.to_json(tmp_path / "task.json"))
+    _same_task(task, again)
+    assert again.metadata == json.loads(task.to_json())["metadata"]
+    for demo in demos:
+        obs = demo.observations
+        index = task.segment_indices(obs)
+        np.testing.assert_array_equal(again.segment_indices(obs), index)
+        np.testing.assert_array_equal(again.reward(obs, index), task.reward(obs, index))
+
+
+def test_same_seed_same_task_and_metadata_records_parameters(demos):
+    a = fit_task(demos, random_state=3, window=4, metric="euclidean")
+    b = fit_task(demos, random_state=3, window=4, metric="euclidean")
+    _same_task(a, b)
+    meta = a.metadata
+    assert meta["n_demos"] == 8 and meta["random_state"] == 3
+    assert meta["segmentation"]["class"] == "TransitionStateClustering"
+    assert meta["segmentation"]["params"]["window"] == 4
+    assert meta["segmentation"]["params"]["random_state"] == 3
+    assert meta["reward"]["params"]["metric"] == "euclidean"
+    json.dumps(meta)  # JSON-safe
+
+
+def test_dims_select_state_columns(demos):
+    rng = np.random.default_rng(0)
+    # Add a pure-noise column in front; the task uses columns (1, 2) only.
+    wide = [np.column_stack([rng.normal(size=len(d.observations)), d.observations]) for d in demos]
+    task = fit_task(wide, dims=[1, 2], random_state=0)
+    plain = fit_task(demos, random_state=0)
+    assert task.dims == (1, 2)
+    _same_task(task, plain, rtol=1e-9)  # column slices differ from a fresh array in rounding
+    with pytest.raises(ValueError, match="dims must be indices"):
+        fit_task(wide, dims=[3])
+
+
+def test_estimators_and_kwargs_are_routed(demos):
+    tsc = TransitionStateClustering(indicator="velocity", random_state=9)
+    task = fit_task(demos, segmentation=tsc, reward={"metric": "euclidean"})
+    assert not hasattr(tsc, "regions_")  # the given instance is cloned, not fitted in place
+    assert task.metadata["segmentation"]["params"]["indicator"] == "velocity"
+    assert task.metadata["reward"]["params"]["metric"] == "euclidean"
+    with pytest.raises(TypeError, match="unexpected keyword arguments"):
+        fit_task(demos, windw=3)
+    with pytest.raises(TypeError, match="cannot be combined"):
+        fit_task(demos, segmentation=tsc, window=3)
+
+
+def test_accepts_npz_paths_and_imitation_trajectories(demos, tmp_path):
+    with_actions = [Demonstration(d.observations, np.zeros(len(d), dtype=np.int64)) for d in demos]
+    path = tmp_path / "demos.npz"
+    save_demos(with_actions, path)
+    base = fit_task(demos, random_state=0)
+    _same_task(fit_task(path, random_state=0), base)
+    _same_task(fit_task(to_imitation(with_actions), random_state=0), base)
+
+
+def test_progress_callback_reports_stages(demos, capsys):
+    seen = []
+    task = fit_task(demos, random_state=0, progress=seen.append)
+    assert seen[0] == "validating demonstrations"
+    assert any("transition regions from 8 demonstrations" in m for m in seen)
+    assert seen[-1] == f"done: {task.n_segments} segments"
+    fit_task(demos, random_state=0, progress=True)
+    assert "learning local rewards" in capsys.readouterr().out
+
+
+def test_kernel_task_works_end_to_end(demos):
+    task = fit_task(demos, kernel="rbf", kernel_sigma=10.0, n_landmarks=50, random_state=0)
+    assert task.features is not None and task.task_dim == task.features.output_dim
+    again = TaskModel.from_json(task.to_json())
+    for demo in demos:
+        index = task.segment_indices(demo.observations)
+        assert index[-1] == task.n_segments
+        np.testing.assert_array_equal(again.segment_indices(demo.observations), index)
+        assert np.all(np.isfinite(task.reward(demo.observations, index)))
+
+
+@st.composite
+def demo_sets(draw):
+    d = draw(st.integers(1, 4))
+    n = draw(st.integers(2, 6))
+    seed = draw(st.integers(0, 2**31 - 1))
+    rng = np.random.default_rng(seed)
+    kind = draw(st.sampled_from(["walk", "piecewise", "constant", "tiny"]))
+    noise = draw(st.sampled_from([0.0, 1e-3, 0.1, 1.0]))
+    out = []
+    for _ in range(n):
+        T = int(rng.integers(3, 60))
+        if kind == "walk":
+            x = np.cumsum(rng.normal(size=(T, d)), axis=0)
+        elif kind == "piecewise":
+            turns = rng.integers(1, T, size=2)
+            v = np.where(np.arange(T)[:, None] < turns.min(), 1.0, -1.0) * np.ones((T, d))
+            x = np.cumsum(v, axis=0)
+        elif kind == "constant":
+            x = np.zeros((T, d))
+        else:
+            x = rng.normal(size=(T, d)) * 1e-9
+        out.append(x + noise * rng.normal(size=x.shape))
+    window = draw(st.integers(1, 5))
+    indicator = draw(st.sampled_from(["gmm", "velocity", "linear"]))
+    return out, window, indicator
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(demo_sets())
+def test_fuzz_fit_task_returns_a_valid_task_or_a_clear_value_error(case):
+    data, window, indicator = case
+    try:
+        task = fit_task(data, window=window, indicator=indicator, random_state=0)
+    except ValueError as exc:
+        assert str(exc)  # a message, raised by our validation
+        return
+    assert isinstance(task, TaskModel)
+    medians = task.metadata["segmentation"]  # parameters recorded
+    assert medians["params"]["window"] == window
+    for reward in task.rewards:
+        assert np.all(np.isfinite(reward.weight)) and np.all(np.isfinite(reward.target))
+    for x in data:
+        index = task.segment_indices(x)
+        assert np.all(np.diff(index) >= 0)
+        assert np.all(np.isfinite(task.reward(x, index)))

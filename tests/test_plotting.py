@@ -1,0 +1,54 @@
+"""Plots of a fitted task (Agg backend, set in conftest)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.patches import Ellipse
+
+from sb3_swirl.demos import make_piecewise_linear_demos
+from sb3_swirl.fitting import fit_task
+from sb3_swirl.plotting import plot_rewards, plot_segments
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    demos, _ = make_piecewise_linear_demos(n_demos=6, dim=3, noise=0.1, random_state=2)
+    return demos, fit_task(demos, random_state=0)
+
+
+def test_plot_segments_draws_demos_and_region_ellipses(fitted, tmp_path):
+    demos, task = fitted
+    fig = plot_segments(demos, task, dims=(0, 2), path=tmp_path / "segments.png")
+    assert isinstance(fig, Figure) and len(fig.axes) == 1
+    ax = fig.axes[0]
+    ellipses = [p for p in ax.patches if isinstance(p, Ellipse)]
+    assert len(ellipses) == 2 * task.n_segments  # a filled and an outlined ellipse per region
+    lines = [c for c in ax.collections if isinstance(c, LineCollection)]
+    assert len(lines) == len(demos)
+    # Steps are coloured by segment: every segment's colour appears.
+    colors = {tuple(np.round(c, 3)) for lc in lines for c in lc.get_colors()}
+    assert len(colors) == task.n_segments
+    outlined = [e for e in ellipses if e.get_facecolor()[3] == 0]
+    np.testing.assert_allclose(outlined[0].center, task.regions[0].mean[[0, 2]])
+    assert (tmp_path / "segments.png").stat().st_size > 1000
+
+
+def test_plot_rewards_has_one_heat_map_per_segment(fitted, tmp_path):
+    _, task = fitted
+    fig = plot_rewards(task, path=tmp_path / "rewards.png")
+    heat = [ax for ax in fig.axes if ax.images]
+    assert len(heat) == task.n_segments
+    assert len(fig.axes) == 2 * task.n_segments  # each with its colour bar
+    np.testing.assert_array_equal(heat[1].images[0].get_array(), task.rewards[1].weight)
+    assert (tmp_path / "rewards.png").stat().st_size > 1000
+
+
+def test_plot_segments_rejects_bad_dims(fitted):
+    demos, task = fitted
+    with pytest.raises(ValueError, match="two different task-space axes"):
+        plot_segments(demos, task, dims=(0, 0))
+    with pytest.raises(ValueError, match="two different task-space axes"):
+        plot_segments(demos, task, dims=(0, 5))

@@ -1,0 +1,215 @@
+"""Transition state clustering on synthetic demonstrations with known switch points."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+from sklearn.decomposition import PCA
+from sklearn.kernel_approximation import Nystroem
+
+from sb3_swirl.demos import Demonstration, make_piecewise_linear_demos
+from sb3_swirl.segmentation import (
+    TransitionStateClustering,
+    segment_boundaries,
+    velocity_indicator,
+)
+
+
+@pytest.fixture(scope="module")
+def three_phases():
+    # 10 noisy 2-D demos, 3 straight phases of 25-40 steps each (ragged), 2 switch points each.
+    return make_piecewise_linear_demos(n_demos=10, n_phases=3, noise=0.1, random_state=7)
+
+
+def _sample_in(region, n, rng):
+    """Uniform-ish points inside an ellipsoid (direction x radius)."""
+    p = region.mean.size
+    u = rng.normal(size=(n, p))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    r = rng.uniform(size=(n, 1)) ** (1 / p) * np.sqrt(region.threshold)
+    chol = np.linalg.cholesky(region.covariance)
+    return region.mean + (u * r) @ chol.T
+
+
+@pytest.mark.parametrize("indicator", ["gmm", "velocity", "linear"])
+def test_each_indicator_recovers_the_switch_points(three_phases, indicator):
+    demos, switches = three_phases
+    tsc = TransitionStateClustering(indicator=indicator, random_state=0).fit(demos)
+    # Two corner regions plus the goal region built from the final states.
+    assert len(tsc.regions_) == 3
+    for demo, segs, sw in zip(demos, tsc.segments_, switches, strict=True):
+        assert np.all(segs >= 0), "every demonstration reaches every region"
+        assert np.all(np.abs(segs[:2] - sw) <= 3), (segs, sw)
+        assert segs[2] >= len(demo) - 3  # the goal is reached at the end
+    times = [np.median([t for _, t in members]) for members in tsc.region_transitions_[:2]]
+    assert times == sorted(times)
+
+
+def test_segments_follow_the_markov_segmentation_function(three_phases):
+    demos, _ = three_phases
+    tsc = TransitionStateClustering(random_state=1).fit(demos)
+    for demo, segs in zip(demos, tsc.segments_, strict=True):
+        inside = np.array([r.contains(demo.observations) for r in tsc.regions_])
+        prev = -1
+        for i, b in enumerate(segs):
+            assert inside[i, b] and not inside[i, prev + 1 : b].any()
+            prev = b
+        np.testing.assert_array_equal(segment_boundaries(demo.observations, tsc.regions_), segs)
+
+
+def test_regions_are_pairwise_disjoint(three_phases):
+    demos, _ = three_phases
+    # A low confidence level keeps regions small; a high one forces shrinking.
+    for confidence in (0.5, 0.999999):
+        tsc = TransitionStateClustering(confidence=confidence, random_state=0).fit(demos)
+        rng = np.random.default_rng(0)
+        for i, a in enumerate(tsc.regions_):
+            pts = _sample_in(a, 4000, rng)
+            assert a.contains(pts).all()
+            for j, b in enumerate(tsc.regions_):
+                if i != j:
+                    assert not b.contains(pts).any()
+
+
+def test_shrinking_separates_overlapping_regions():
+    # Two corners 1 unit apart with wide spread: the raw 95% ellipsoids overlap.
+    rng = np.random.default_rng(3)
+    base = np.array([[0, 0], [10, 0], [10.5, 0.5], [11, 10], [11, 20]], dtype=float)
+    demos = []
+    for _ in range(8):
+        pts = base + rng.normal(scale=0.3, size=base.shape)
+        path = np.concatenate(
+            [np.linspace(pts[k], pts[k + 1], 12, endpoint=False) for k in range(4)]
+        )
+        demos.append(np.vstack([path, pts[-1]]))
+    tsc = TransitionStateClustering(indicator="velocity", min_demo_fraction=0.6, random_state=0)
+    tsc.fit(demos)
+    for i, a in enumerate(tsc.regions_):
+        pts = _sample_in(a, 3000, rng)
+        for j, b in enumerate(tsc.regions_):
+            if i != j:
+                assert not b.contains(pts).any()
+
+
+def _with_detour(demos, switches, n_detour, rng):
+    """Insert an out-and-back excursion mid-way through phase 2 of the first n_detour demos."""
+    out, apexes = [], []
+    for i, (demo, sw) in enumerate(zip(demos, switches, strict=True)):
+        x = demo.observations
+        if i < n_detour:
+            m = (sw[0] + sw[1]) // 2
+            v = x[sw[1]] - x[sw[0]]
+            perp = np.array([-v[1], v[0]]) / np.linalg.norm(v)
+            k = np.r_[np.arange(1, 9), np.arange(7, -1, -1)][:, None] * 1.5 * perp
+            x = np.vstack([x[: m + 1], x[m] + k + rng.normal(scale=0.05, size=k.shape), x[m + 1 :]])
+            apexes.append((x[m], x[m] + 12 * perp))
+        out.append(Demonstration(x))
+    return out, apexes
+
+
+def _dist_to_detour(point, apexes):
+    start, apex = np.mean([a for a, _ in apexes], axis=0), np.mean([b for _, b in apexes], axis=0)
+    t = np.clip((point - start) @ (apex - start) / np.sum((apex - start) ** 2), 0, 1)
+    return float(np.linalg.norm(point - (start + t * (apex - start))))
+
+
+@pytest.mark.parametrize("indicator", ["gmm", "velocity", "linear"])
+def test_pruning_drops_a_transition_only_some_demos_make(indicator):
+    demos, switches = make_piecewise_linear_demos(n_demos=10, noise=0.05, random_state=0)
+    demos, apexes = _with_detour(demos, switches, 3, np.random.default_rng(0))
+    strict = TransitionStateClustering(indicator=indicator, random_state=0).fit(demos)
+    assert len(strict.regions_) == 3
+    assert min(_dist_to_detour(r.mean, apexes) for r in strict.regions_) > 5
+    loose = TransitionStateClustering(indicator=indicator, min_demo_fraction=0.3, random_state=0)
+    loose.fit(demos)
+    assert len(loose.regions_) > 3
+    assert min(_dist_to_detour(r.mean, apexes) for r in loose.regions_) < 2
+    # The demonstrations that make the detour pass through every region.
+    assert all((segs >= 0).all() for segs in loose.segments_[:3])
+
+
+def test_same_seed_gives_identical_regions(three_phases):
+    demos, _ = three_phases
+    fits = [TransitionStateClustering(random_state=5).fit(demos) for _ in range(2)]
+    assert len(fits[0].regions_) == len(fits[1].regions_)
+    for a, b in zip(fits[0].regions_, fits[1].regions_, strict=True):
+        np.testing.assert_array_equal(a.mean, b.mean)
+        np.testing.assert_array_equal(a.covariance, b.covariance)
+        assert a.threshold == b.threshold
+
+
+def test_callable_indicator_and_partial_settings(three_phases):
+    demos, switches = three_phases
+    calls = []
+
+    def oracle(states, random_state):
+        calls.append(random_state)
+        return [np.asarray(sw) for sw in switches]
+
+    tsc = TransitionStateClustering(indicator=oracle, random_state=0).fit(demos)
+    assert len(calls) == 1 and isinstance(calls[0], int)
+    assert [t.tolist() for t in tsc.transitions_] == [sw.tolist() for sw in switches]
+    assert len(tsc.regions_) == 3
+    strict_angle = functools.partial(velocity_indicator, window=3, angle_threshold=3.1)
+    tsc = TransitionStateClustering(indicator=strict_angle, random_state=0).fit(demos)
+    assert all(len(t) == 0 for t in tsc.transitions_)
+    assert len(tsc.regions_) == 1  # only the goal remains
+
+
+def test_bad_indicator_output_and_parameters_raise_value_error(three_phases):
+    demos, _ = three_phases
+    with pytest.raises(ValueError, match="one index array per demonstration"):
+        TransitionStateClustering(indicator=lambda s, r: [np.array([3])]).fit(demos)
+    with pytest.raises(ValueError, match="non-integer"):
+        TransitionStateClustering(indicator=lambda s, r: [np.array([3.5])] * len(s)).fit(demos)
+    with pytest.raises(ValueError, match="indicator must be one of"):
+        TransitionStateClustering(indicator="hmm").fit(demos)
+    with pytest.raises(ValueError, match="window must be a positive integer"):
+        TransitionStateClustering(window=0).fit(demos)
+    with pytest.raises(ValueError, match=r"min_demo_fraction must be in \(0, 1\]"):
+        TransitionStateClustering(min_demo_fraction=1.5).fit(demos)
+    with pytest.raises(ValueError, match="no transition region is shared"):
+        TransitionStateClustering(
+            indicator=lambda s, r: [np.zeros(0, dtype=int)] * len(s), include_goal=False
+        ).fit(demos)
+
+
+def test_use_time_gives_regions_time_windows(three_phases):
+    demos, _ = three_phases
+    tsc = TransitionStateClustering(use_time=True, random_state=0).fit(demos)
+    for region, members in zip(tsc.regions_[:-1], tsc.region_transitions_[:-1], strict=True):
+        lo, hi = region.time_bounds
+        assert all(lo <= t <= hi for _, t in members)
+    assert tsc.regions_[-1].time_bounds is not None
+    assert all((s >= 0).all() for s in tsc.segments_)
+    # Outside its window a region is not reached even at its centre.
+    r = tsc.regions_[0]
+    assert not r.contains(r.mean, r.time_bounds[1] + 1) and r.contains(r.mean, r.time_bounds[0])
+
+
+def test_kernel_features_reproduce_nystroem_pca(three_phases):
+    demos, _ = three_phases
+    tsc = TransitionStateClustering(
+        kernel="rbf", kernel_sigma=10.0, n_landmarks=60, n_kernel_components=3, random_state=0
+    ).fit(demos)
+    fmap = tsc.feature_map_
+    assert fmap.landmarks.shape == (60, 2) and fmap.output_dim == 3
+    states = np.concatenate([d.observations for d in demos])
+    # Independent reconstruction with sklearn: Nystroem on the same landmarks, then PCA.
+    # (Any order of the landmarks gives the same features up to an orthogonal map, so the
+    # PCA scores agree up to the sign of each component.)
+    nys = Nystroem(gamma=fmap.gamma, n_components=60, random_state=123).fit(fmap.landmarks)
+    expected = PCA(n_components=3).fit_transform(nys.transform(states))
+    got = fmap(states)
+    for j in range(3):
+        sign = np.sign(expected[:, j] @ got[:, j])
+        np.testing.assert_allclose(
+            got[:, j], sign * expected[:, j], atol=1e-6 * np.abs(expected).max()
+        )
+    assert all(r.mean.size == 3 for r in tsc.regions_)
+    assert all((s >= 0).all() for s in tsc.segments_)
+    np.testing.assert_allclose(
+        tsc.transform_states(demos[0].observations), fmap(demos[0].observations)
+    )
