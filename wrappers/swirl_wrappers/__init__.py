@@ -1,6 +1,24 @@
 """Gymnasium runtime of a SWIRL proxy task (needs only gymnasium and numpy)."""
 
 from swirl_wrappers.task import SCHEMA_VERSION, QuadraticReward, RBFFeatures, Region, TaskModel
+from swirl_wrappers.wrappers import (
+    SegmentTracker,
+    SwirlVectorWrapper,
+    SwirlWrapper,
+    lift_observation,
+    lift_observation_space,
+)
 
-__all__ = ["SCHEMA_VERSION", "QuadraticReward", "RBFFeatures", "Region", "TaskModel"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "QuadraticReward",
+    "RBFFeatures",
+    "Region",
+    "SegmentTracker",
+    "SwirlVectorWrapper",
+    "SwirlWrapper",
+    "TaskModel",
+    "lift_observation",
+    "lift_observation_space",
+]
 __version__ = "0.1.0"

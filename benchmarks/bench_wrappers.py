@@ -1,0 +1,189 @@
+"""Per-step cost of the SWIRL wrappers, measured side by side with the raw environments.
+
+Targets: ``SwirlWrapper(Acrobot-v1)`` steps at most 1.15x the time of raw ``Acrobot-v1``, and
+the vector wrappers (SB3 ``SwirlVecEnv`` over ``DummyVecEnv``, gymnasium ``SwirlVectorWrapper``
+over ``SyncVectorEnv``, 64 sub-envs) add at most 1 microsecond per env-step.
+
+The vector sub-envs are a cheap 4-D env (a few microseconds a step, an episode every 25 steps,
+so autoresets are exercised): under 64 CartPoles a 1 us difference is ~2% of the step time and
+lost in the noise of a shared machine; over the cheap env it is measured directly.
+
+Raw and wrapped runs alternate, repeat after repeat, and the medians are compared, so slow
+phases of a shared machine hit both sides alike.
+
+Run: ``.venv/bin/python benchmarks/bench_wrappers.py [--quick]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+import timeit
+from collections.abc import Callable
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from sb3_swirl.vec_env import SwirlVecEnv
+from swirl_wrappers import QuadraticReward, Region, SwirlVectorWrapper, SwirlWrapper, TaskModel
+
+ACROBOT_RATIO_TARGET = 1.15
+VECTOR_ADDED_US_TARGET = 1.0
+N_ENVS = 64
+
+
+def three_region_task(dims: tuple[int, ...], seed: int = 0) -> TaskModel:
+    """A 3-region task in a 4-D task space (full covariances and weights, like a fitted one)."""
+    rng = np.random.default_rng(seed)
+    regions, rewards = [], []
+    for _ in range(3):
+        a = rng.normal(size=(4, 4)) * 0.3
+        regions.append(Region(rng.normal(size=4) * 0.5, a @ a.T + 0.05 * np.eye(4), 9.0))
+        b = rng.normal(size=(4, 4))
+        rewards.append(QuadraticReward(rng.normal(size=4) * 0.5, b @ b.T))
+    return TaskModel(regions, rewards, dims=dims)
+
+
+class CheapEnv(gym.Env):
+    """A 4-D env whose step costs little more than gymnasium's own call overhead."""
+
+    observation_space = gym.spaces.Box(-5.0, 5.0, (4,), dtype=np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self, episode_length: int = 25) -> None:
+        self.episode_length = episode_length
+        self._states = np.random.default_rng(0).uniform(-1, 1, (97, 4)).astype(np.float32)
+        self._t = 0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self._t = int(self.np_random.integers(97))
+        self._steps = 0
+        return self._states[self._t].copy(), {}
+
+    def step(self, action):
+        self._t = (self._t + 1 + int(action)) % 97
+        self._steps += 1
+        return self._states[self._t].copy(), 0.0, self._steps >= self.episode_length, False, {}
+
+
+def single_stepper(env: gym.Env, steps: int, seed: int) -> Callable[[], float]:
+    env.reset(seed=seed)
+    actions = np.random.default_rng(seed).integers(env.action_space.n, size=steps).tolist()
+
+    def run() -> float:
+        step, reset = env.step, env.reset
+        start = time.perf_counter()
+        for a in actions:
+            _, _, terminated, truncated, _ = step(a)
+            if terminated or truncated:
+                reset()
+        return time.perf_counter() - start
+
+    return run
+
+
+def sb3_stepper(venv, steps: int, seed: int) -> Callable[[], float]:
+    venv.seed(seed)
+    venv.reset()
+    actions = np.random.default_rng(seed).integers(2, size=(steps, venv.num_envs))
+
+    def run() -> float:
+        start = time.perf_counter()
+        for a in actions:
+            venv.step(a)
+        return time.perf_counter() - start
+
+    return run
+
+
+def gym_vector_stepper(envs, steps: int, seed: int) -> Callable[[], float]:
+    envs.reset(seed=seed)
+    actions = np.random.default_rng(seed).integers(2, size=(steps, envs.num_envs))
+
+    def run() -> float:
+        start = time.perf_counter()
+        for a in actions:
+            envs.step(a)
+        return time.perf_counter() - start
+
+    return run
+
+
+def side_by_side(raw: Callable[[], float], wrapped: Callable[[], float], repeats: int):
+    raw(), wrapped()  # warm caches and lazy imports
+    raw_times, wrapped_times = [], []
+    for _ in range(repeats):
+        raw_times.append(raw())
+        wrapped_times.append(wrapped())
+    return float(np.median(raw_times)), float(np.median(wrapped_times))
+
+
+def main(argv: list[str] | None = None) -> dict[str, float]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="short smoke run")
+    args = parser.parse_args(argv)
+    steps, vec_steps, repeats = (200, 20, 5) if args.quick else (500, 100, 31)
+    results: dict[str, float] = {}
+    load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+    print(f"{os.cpu_count()} CPUs, load average {load} (timings are medians of {repeats} pairs)")
+    # The vector wrappers cost a fixed number of small numpy calls per step: report what one
+    # costs here, so the added microseconds can be compared across machines.
+    row = np.zeros(N_ENVS)
+    ufunc_us = min(timeit.repeat(lambda: row + 1.0, number=2000, repeat=5)) / 2000 * 1e6
+    print(f"one numpy ufunc call on {N_ENVS} floats: {ufunc_us:.2f} us")
+    results["ufunc_us"] = ufunc_us
+
+    # Acrobot observations are (cos t1, sin t1, cos t2, sin t2, w1, w2); the task reads 4 of them.
+    task = three_region_task(dims=(0, 1, 2, 3))
+    raw, wrapped = side_by_side(
+        single_stepper(gym.make("Acrobot-v1"), steps, seed=0),
+        single_stepper(SwirlWrapper(gym.make("Acrobot-v1"), task), steps, seed=0),
+        repeats,
+    )
+    ratio = wrapped / raw
+    results["acrobot_ratio"] = ratio
+    print(
+        f"SwirlWrapper(Acrobot-v1): raw {raw / steps * 1e6:.1f} us/step, wrapped "
+        f"{wrapped / steps * 1e6:.1f} us/step, ratio {ratio:.3f}x "
+        f"(target <= {ACROBOT_RATIO_TARGET}x) {'OK' if ratio <= ACROBOT_RATIO_TARGET else 'MISSED'}"
+    )
+
+    vec_task = three_region_task(dims=(0, 1, 2, 3), seed=1)
+
+    def make_envs():
+        return [CheapEnv for _ in range(N_ENVS)]
+
+    for name, raw_run, wrapped_run in (
+        (
+            "SwirlVecEnv(DummyVecEnv)",
+            sb3_stepper(DummyVecEnv(make_envs()), vec_steps, seed=0),
+            sb3_stepper(SwirlVecEnv(DummyVecEnv(make_envs()), vec_task), vec_steps, seed=0),
+        ),
+        (
+            "SwirlVectorWrapper(SyncVectorEnv)",
+            gym_vector_stepper(gym.vector.SyncVectorEnv(make_envs()), vec_steps, seed=0),
+            gym_vector_stepper(
+                SwirlVectorWrapper(gym.vector.SyncVectorEnv(make_envs()), vec_task),
+                vec_steps,
+                seed=0,
+            ),
+        ),
+    ):
+        raw, wrapped = side_by_side(raw_run, wrapped_run, repeats)
+        env_steps = vec_steps * N_ENVS
+        added = (wrapped - raw) / env_steps * 1e6
+        results[name] = added
+        print(
+            f"{name}, {N_ENVS} sub-envs: raw {raw / env_steps * 1e6:.2f} us/env-step, "
+            f"added {added:.3f} us/env-step ({wrapped / raw:.3f}x) "
+            f"(target <= {VECTOR_ADDED_US_TARGET} us) "
+            f"{'OK' if added <= VECTOR_ADDED_US_TARGET else 'MISSED'}"
+        )
+    return results
+
+
+if __name__ == "__main__":
+    main()

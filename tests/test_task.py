@@ -1,0 +1,284 @@
+"""TaskModel: the proxy task's maths, validation and JSON format."""
+
+from __future__ import annotations
+
+import json
+import pickle
+
+import numpy as np
+import pytest
+
+from swirl_wrappers import SCHEMA_VERSION, QuadraticReward, RBFFeatures, Region, TaskModel
+
+
+def random_task(
+    seed: int, k: int = 3, p: int = 4, dims=None, timed: bool = False, features=None
+) -> TaskModel:
+    rng = np.random.default_rng(seed)
+    regions, rewards = [], []
+    for i in range(k):
+        a = rng.normal(size=(p, p))
+        b = rng.normal(size=(p, p - 1))  # rank-deficient: Psi only positive semi-definite
+        bounds = (2.0 * i, 2.0 * i + 20.0) if timed else None
+        regions.append(Region(rng.normal(size=p), a @ a.T + 0.1 * np.eye(p), 3.0, bounds))
+        rewards.append(QuadraticReward(rng.normal(size=p), b @ b.T))
+    return TaskModel(regions, rewards, dims=dims, features=features, metadata={"seed": seed})
+
+
+def reference(task: TaskModel, x: np.ndarray, t, index: np.ndarray):
+    """Rewards and next indices straight from the definitions, one state at a time."""
+    z = task.featurize(x)
+    rewards, nxt = [], []
+    for zi, ti, i in zip(z, t, index, strict=True):
+        w = task.rewards[min(i, task.n_segments - 1)]
+        d = zi - w.target
+        rewards.append(-d @ w.weight @ d)
+        inside = i < task.n_segments and bool(task.regions[i].contains(zi, ti))
+        nxt.append(i + 1 if inside else i)
+    return np.array(rewards), np.array(nxt)
+
+
+def rbf_task(seed: int = 0) -> TaskModel:
+    rng = np.random.default_rng(seed)
+    features = RBFFeatures(
+        landmarks=rng.normal(size=(6, 3)),
+        gamma=0.7,
+        projection=rng.normal(size=(6, 2)),
+        offset=rng.normal(size=2),
+    )
+    return random_task(seed, k=2, p=2, dims=(4, 0, 2), features=features)
+
+
+TASKS = {
+    "plain": lambda: random_task(0),
+    "dims": lambda: random_task(1, dims=(5, 1, 0, 3)),
+    "timed": lambda: random_task(2, timed=True),
+    "rbf": lambda: rbf_task(3),
+}
+
+
+def random_batch(task: TaskModel, seed: int, n: int = 400):
+    rng = np.random.default_rng(seed)
+    if task.dims is not None:
+        obs_dim = max(task.dims) + 2  # the task reads only some of the observation
+    elif task.features is not None:
+        obs_dim = task.features.input_dim
+    else:
+        obs_dim = task.task_dim
+    x = rng.normal(size=(n, obs_dim))
+    if task.features is None:
+        # Put a third of the states near a region centre so both branches of M are exercised.
+        centres = np.array([r.mean for r in task.regions])
+        pick = rng.integers(0, task.n_segments, n // 3)
+        near = centres[pick] + 0.05 * rng.normal(size=(n // 3, task.task_dim))
+        cols = list(task.dims) if task.dims is not None else list(range(task.task_dim))
+        x[: n // 3, cols] = near
+        index = rng.integers(0, task.n_indices, n)
+        index[: n // 3] = pick
+    else:
+        index = rng.integers(0, task.n_indices, n)
+    t = rng.integers(0, 30, n)
+    return x, t, index
+
+
+@pytest.mark.parametrize("name", sorted(TASKS))
+def test_batch_single_and_reference_agree(name):
+    task = TASKS[name]()
+    x, t, index = random_batch(task, seed=10)
+    want_r, want_i = reference(task, x, t, index)
+    assert 0 < (want_i > index).sum() or task.features is not None
+    r = task.reward(x, index)
+    i = task.next_segment(x, t, index)
+    np.testing.assert_allclose(r, want_r, rtol=1e-10, atol=1e-10)
+    np.testing.assert_array_equal(i, want_i)
+    rb, ib = task.reward_and_next_batch(x, t, index)
+    np.testing.assert_array_equal(rb, r)
+    np.testing.assert_array_equal(ib, i)
+    for row in range(0, len(x), 7):
+        r1, i1 = task.reward_and_next(x[row], int(t[row]), int(index[row]))
+        assert isinstance(r1, float) and isinstance(i1, int)
+        assert r1 == pytest.approx(want_r[row], rel=1e-10, abs=1e-10)
+        assert i1 == want_i[row]
+        assert float(task.reward(x[row], index[row])) == pytest.approx(r1, rel=1e-12, abs=1e-12)
+        assert int(task.next_segment(x[row], t[row], index[row])) == i1
+
+
+def test_membership_is_exact_at_the_boundary():
+    # A 1-D region of radius 0.5: the wrapper's folded maths must keep the inclusive edge.
+    task = TaskModel([Region([1.0], [[0.25]], 1.0)], [QuadraticReward([1.0], [[1.0]])])
+    assert task.reward_and_next(np.array([1.5]), 0, 0)[1] == 1
+    assert task.reward_and_next(np.array([1.5001]), 0, 0)[1] == 0
+    assert task.next_segment(np.array([[0.5], [0.4999]]), None, [0, 0]).tolist() == [1, 0]
+
+
+def test_time_bounds_gate_the_region():
+    task = TaskModel(
+        [Region([0.0], [[1.0]], 1.0, time_bounds=(5, 10))], [QuadraticReward([0.0], [[1.0]])]
+    )
+    x = np.zeros((4, 1))
+    assert task.next_segment(x, [4, 5, 10, 11], 0).tolist() == [0, 1, 1, 0]
+    assert task.next_segment(x, None, 0).tolist() == [1, 1, 1, 1]
+    assert task.segment_indices(np.zeros((8, 1))).tolist() == [0, 0, 0, 0, 0, 1, 1, 1]
+
+
+def test_reward_after_completion_is_last_segments():
+    task = random_task(4, k=2, p=2)
+    x = np.random.default_rng(0).normal(size=(5, 2))
+    np.testing.assert_array_equal(task.reward(x, 2), task.reward(x, 1))
+    np.testing.assert_array_equal(task.next_segment(x, 0, 2), [2] * 5)
+
+
+@pytest.mark.parametrize("name", sorted(TASKS))
+def test_segment_indices_matches_stepping(name):
+    task = TASKS[name]()
+    x, _, _ = random_batch(task, seed=5, n=60)
+    rng = np.random.default_rng(1)
+    # A trajectory that visits the regions in order, with noise states in between.
+    if task.features is None:
+        cols = list(task.dims) if task.dims is not None else list(range(task.task_dim))
+        for j, region in enumerate(task.regions):
+            x[10 + 15 * j, cols] = region.mean + 1e-3 * rng.normal(size=task.task_dim)
+    got = task.segment_indices(x)
+    i, want = 0, []
+    for t, state in enumerate(x):
+        i = int(task.next_segment(state, t, i))
+        want.append(i)
+    np.testing.assert_array_equal(got, want)
+    assert np.all(np.diff(got) >= 0)
+    if task.features is None and task.regions[0].time_bounds is None:
+        assert got[-1] == task.n_segments
+
+
+@pytest.mark.parametrize("name", sorted(TASKS))
+def test_json_round_trip_is_exact(name, tmp_path):
+    task = TASKS[name]()
+    text = task.to_json(tmp_path / "task.json")
+    for loaded in (TaskModel.from_json(text), TaskModel.from_json(tmp_path / "task.json")):
+        assert loaded.to_dict() == task.to_dict()
+        x, t, index = random_batch(task, seed=7)
+        np.testing.assert_array_equal(loaded.reward(x, index), task.reward(x, index))
+        np.testing.assert_array_equal(
+            loaded.next_segment(x, t, index), task.next_segment(x, t, index)
+        )
+    assert json.loads(text)["schema_version"] == SCHEMA_VERSION
+    assert loaded.metadata == task.metadata
+
+
+def test_pickle_round_trip():
+    task = rbf_task()
+    loaded = pickle.loads(pickle.dumps(task))
+    x, t, index = random_batch(task, seed=2)
+    np.testing.assert_array_equal(loaded.reward(x, index), task.reward(x, index))
+    np.testing.assert_array_equal(loaded.next_segment(x, t, index), task.next_segment(x, t, index))
+
+
+def test_rbf_features_are_the_documented_map():
+    task = rbf_task()
+    f = task.features
+    s = np.random.default_rng(3).normal(size=(10, 6))
+    sel = s[:, [4, 0, 2]]
+    sq = ((sel[:, None, :] - f.landmarks[None]) ** 2).sum(-1)
+    want = np.exp(-f.gamma * sq) @ f.projection - f.offset
+    np.testing.assert_allclose(task.featurize(s), want, rtol=1e-12)
+    np.testing.assert_allclose(task.featurize(s[0]), want[0], rtol=1e-12)
+
+
+def _corrupt(text: str) -> str:
+    return text.replace('"regions"', '"regions" [', 1)
+
+
+@pytest.mark.parametrize(
+    ("make_text", "message"),
+    [
+        (_corrupt, "not valid JSON"),
+        (lambda text: text[: len(text) // 2], "not valid JSON"),
+        (lambda text: "[1, 2]", "must be a JSON object"),
+        (lambda text: text.replace('"schema_version": 1', '"schema_version": 99'), "version 99"),
+        (lambda text: text.replace('"swirl_task"', '"other"'), "'other'"),
+    ],
+)
+def test_bad_json_is_a_clear_value_error(make_text, message):
+    text = random_task(0).to_json()
+    with pytest.raises(ValueError, match=message):
+        TaskModel.from_json(make_text(text))
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda d: d.pop("regions"), "missing field 'regions'"),
+        (lambda d: d.pop("rewards"), "missing field 'rewards'"),
+        (lambda d: d["regions"][0].pop("covariance"), "missing field 'covariance'"),
+        (lambda d: d["rewards"][1].pop("target"), "missing field 'target'"),
+        (lambda d: d.update(regions=5), "malformed task model"),
+        (lambda d: d["regions"][0].update(threshold="big"), "threshold must be a positive"),
+        (lambda d: d["regions"][0].update(mean=[1.0, None, 0.0, 0.0]), "mean"),
+        (lambda d: d["rewards"].pop(), "one reward per region"),
+        (lambda d: d.update(dims=[0, 1]), "dims selects 2 values"),
+        (lambda d: d.update(features={"type": "poly"}), "unknown feature map type"),
+    ],
+)
+def test_bad_fields_are_clear_value_errors(edit, message):
+    data = random_task(0).to_dict()
+    edit(data)
+    with pytest.raises(ValueError, match=message):
+        TaskModel.from_json(json.dumps(data))
+
+
+def test_missing_file_is_a_value_error(tmp_path):
+    with pytest.raises(ValueError, match="cannot read task model file"):
+        TaskModel.from_json(tmp_path / "absent.json")
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"covariance": [[1.0, 2.0], [2.0, 1.0]]}, "positive definite"),
+        ({"covariance": [[1.0, 0.5], [0.0, 1.0]]}, "symmetric"),
+        ({"covariance": [[np.nan, 0.0], [0.0, 1.0]]}, "NaN or inf"),
+        ({"mean": [np.nan, 0.0]}, "NaN or inf"),
+        ({"mean": [0.0, 0.0, 0.0]}, "shape"),
+        ({"threshold": -1.0}, "threshold"),
+        ({"threshold": np.inf}, "threshold"),
+        ({"time_bounds": (5, 1)}, "time_bounds"),
+        ({"time_bounds": (1,)}, "time_bounds"),
+    ],
+)
+def test_invalid_region(kwargs, message):
+    args = {"mean": [0.0, 0.0], "covariance": np.eye(2), "threshold": 1.0} | kwargs
+    with pytest.raises(ValueError, match=message):
+        Region(**args)
+
+
+@pytest.mark.parametrize(
+    ("weight", "message"),
+    [
+        ([[1.0, 0.0], [0.0, -1.0]], "semi-definite"),
+        ([[1.0, 1.0], [0.0, 1.0]], "symmetric"),
+        ([[np.inf, 0.0], [0.0, 1.0]], "NaN or inf"),
+    ],
+)
+def test_invalid_reward(weight, message):
+    with pytest.raises(ValueError, match=message):
+        QuadraticReward([0.0, 0.0], weight)
+
+
+def test_invalid_task_and_calls():
+    region, reward = Region([0.0, 0.0], np.eye(2), 1.0), QuadraticReward([0.0, 0.0], np.eye(2))
+    with pytest.raises(ValueError, match="at least one region"):
+        TaskModel([], [])
+    with pytest.raises(ValueError, match="expected Region"):
+        TaskModel([reward], [reward])
+    with pytest.raises(ValueError, match="non-negative"):
+        TaskModel([region], [reward], dims=(0, -1))
+    with pytest.raises(ValueError, match="expected RBFFeatures"):
+        TaskModel([region], [reward], features="rbf")
+    task = TaskModel([region], [reward], dims=(3, 1))
+    with pytest.raises(ValueError, match="uses index 3"):
+        task.reward(np.zeros(3), 0)
+    with pytest.raises(ValueError, match=r"segment index must lie in \[0, 1\]"):
+        task.next_segment(np.zeros(4), 0, 2)
+    with pytest.raises(ValueError, match="integer"):
+        task.reward(np.zeros(4), 0.5)
+    with pytest.raises(ValueError, match="shape"):
+        task.segment_indices(np.zeros(4))

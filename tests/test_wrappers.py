@@ -1,0 +1,535 @@
+"""SwirlWrapper, SwirlVectorWrapper and SwirlVecEnv: exact values, checkers, equivalence."""
+
+from __future__ import annotations
+
+import pickle
+import warnings
+from typing import ClassVar
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium import spaces
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+from sb3_swirl.vec_env import SwirlVecEnv
+from swirl_wrappers import (
+    QuadraticReward,
+    Region,
+    SegmentTracker,
+    SwirlVectorWrapper,
+    SwirlWrapper,
+    TaskModel,
+)
+
+
+class PointEnv(gym.Env):
+    """A point moved by ``step_size`` along one axis per action; the observation is its position.
+
+    Action 0 stays, action ``2 j + 1`` / ``2 j + 2`` moves along axis ``j`` up / down. The env's
+    own reward is the first coordinate (so ``task_reward`` is checkable); the episode terminates
+    when that coordinate leaves ``[-limit, limit]`` and is truncated after ``max_steps``.
+    """
+
+    metadata: ClassVar[dict] = {"render_modes": []}
+
+    def __init__(
+        self,
+        dim: int = 1,
+        step_size: float = 0.5,
+        jitter: float = 0.0,
+        limit: float = 10.0,
+        max_steps: int = 50,
+        as_dict: bool = False,
+    ) -> None:
+        self.dim, self.step_size, self.jitter = dim, step_size, jitter
+        self.limit, self.max_steps, self.as_dict = limit, max_steps, as_dict
+        box = spaces.Box(-20.0, 20.0, (dim,), dtype=np.float32)
+        if as_dict:
+            self.observation_space = spaces.Dict(
+                {"observation": box, "goal": spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)}
+            )
+        else:
+            self.observation_space = box
+        self.action_space = spaces.Discrete(2 * dim + 1)
+        self.pos = np.zeros(dim, dtype=np.float32)
+        self.steps = 0
+
+    def _obs(self):
+        if self.as_dict:
+            return {"observation": self.pos.copy(), "goal": np.full(2, 0.5, dtype=np.float32)}
+        return self.pos.copy()
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        start = self.np_random.uniform(-self.jitter, self.jitter, self.dim)
+        self.pos = start.astype(np.float32)
+        if options and "start" in options:
+            self.pos = np.asarray(options["start"], dtype=np.float32)
+        self.steps = 0
+        return self._obs(), {"from_env": True}
+
+    def step(self, action):
+        action = int(action)
+        if action:
+            axis, sign = (action - 1) // 2, 1.0 if action % 2 else -1.0
+            self.pos[axis] += sign * self.step_size
+        self.steps += 1
+        terminated = bool(abs(self.pos[0]) > self.limit)
+        truncated = self.steps >= self.max_steps
+        return self._obs(), float(self.pos[0]), terminated, truncated, {"is_success": False}
+
+
+UP, DOWN, STAY = 1, 2, 0
+
+
+def line_task(scale_cov: float = 0.01) -> TaskModel:
+    """Two regions on a line, at x = 1 and x = 2 (radius 0.3); rewards pull to them (Psi = 2)."""
+    regions = [Region([c], [[scale_cov]], 9.0) for c in (1.0, 2.0)]
+    rewards = [QuadraticReward([c], [[2.0]]) for c in (1.0, 2.0)]
+    return TaskModel(regions, rewards)
+
+
+def plane_task() -> TaskModel:
+    """A 2-D task on a 2-D point env: two regions reachable by a random walk in a few steps."""
+    regions = [
+        Region([0.5, 0.0], np.eye(2) * 0.1, 2.0),
+        Region([1.0, 0.5], [[0.2, 0.05], [0.05, 0.1]], 2.0),
+        Region([0.0, 1.0], np.eye(2) * 0.2, 2.0),
+    ]
+    rewards = [QuadraticReward(r.mean, [[1.0, 0.2], [0.2, 0.5]]) for r in regions]
+    return TaskModel(regions, rewards)
+
+
+# ----------------------------------------------------------------------- exact single-env values
+def test_rewards_indices_bonus_and_info_on_a_line():
+    env = SwirlWrapper(PointEnv(), line_task(), reward_scale=3.0, region_bonus=10.0)
+    obs, info = env.reset(seed=0)
+    assert info == {"from_env": True, "segment": 0}
+    np.testing.assert_array_equal(obs, [0.0, 1.0, 0.0, 0.0])
+    assert obs.dtype == np.float32
+    # (action, position after it, index used for the reward, index after, bonus?)
+    plan = [
+        (UP, 0.5, 0, 0, False),
+        (UP, 1.0, 0, 1, True),  # enters region 0: reward R_0(s') plus the bonus, then advance
+        (UP, 1.5, 1, 1, False),
+        (DOWN, 1.0, 1, 1, False),  # back in region 0: no second bonus
+        (UP, 1.5, 1, 1, False),
+        (UP, 2.0, 1, 2, True),  # the last region: index k = 2
+        (UP, 2.5, 1, 2, False),  # after completion the last segment's reward stays
+    ]
+    for action, x, used, after, bonus in plan:
+        obs, reward, terminated, truncated, info = env.step(action)
+        target = (1.0, 2.0)[used]
+        want = 3.0 * -2.0 * (x - target) ** 2 + (10.0 if bonus else 0.0)
+        assert reward == pytest.approx(want, abs=1e-12)
+        assert info["segment"] == after == env.segment
+        assert info["segment_reward"] == reward
+        assert info["task_reward"] == x  # the env's own reward passes through in info
+        assert info["is_success"] is False
+        np.testing.assert_array_equal(obs, np.r_[x, np.eye(3)[after]].astype(np.float32))
+        assert not terminated and not truncated
+
+
+def test_regions_must_be_reached_in_order():
+    env = SwirlWrapper(PointEnv(), line_task())
+    env.reset(options={"start": [2.0]})  # starts in region 1, which is not next
+    assert env.segment == 0
+    indices = [env.step(a)[4]["segment"] for a in (STAY, DOWN, DOWN, UP, UP)]
+    # x: 2.0, 1.5, 1.0 (region 0 -> 1), 1.5, 2.0 (region 1 -> 2)
+    assert indices == [0, 0, 1, 1, 2]
+
+
+def test_initial_state_inside_region_zero_advances_on_reset():
+    env = SwirlWrapper(PointEnv(), line_task(), region_bonus=5.0)
+    obs, info = env.reset(options={"start": [1.1]})
+    assert info["segment"] == 1 and env.segment == 1
+    np.testing.assert_array_equal(obs[1:], [0.0, 1.0, 0.0])
+    # The reset is not a transition: no reward, and the next step earns no bonus either.
+    _, reward, *_ = env.step(STAY)
+    assert reward == pytest.approx(-2.0 * (1.1 - 2.0) ** 2, rel=1e-6)
+
+
+def test_terminate_on_completion():
+    env = SwirlWrapper(PointEnv(), line_task(), terminate_on_completion=True)
+    env.reset()
+    flags = [env.step(UP)[2] for _ in range(4)]  # x = 0.5, 1.0, 1.5, 2.0
+    assert flags == [False, False, False, True]
+    plain = SwirlWrapper(PointEnv(), line_task())
+    plain.reset()
+    assert not any(plain.step(UP)[2] for _ in range(4))
+
+
+def test_env_termination_and_truncation_pass_through():
+    env = SwirlWrapper(PointEnv(limit=0.9, max_steps=3), line_task())
+    env.reset()
+    assert env.step(UP)[2:4] == (False, False)
+    assert env.step(UP)[2:4] == (True, False)
+    env.reset()
+    for _ in range(2):
+        env.step(STAY)
+    assert env.step(STAY)[2:4] == (False, True)
+
+
+def test_counter_resets_with_the_episode():
+    task = TaskModel(
+        [Region([0.0], [[1.0]], 1.0, time_bounds=(2, 3))], [QuadraticReward([0.0], [[1.0]])]
+    )
+    env = SwirlWrapper(PointEnv(), task)
+    for _ in range(2):
+        env.reset()
+        assert [env.step(STAY)[4]["segment"] for _ in range(3)] == [0, 1, 1]
+
+
+def test_wrapper_follows_segment_indices_of_the_trajectory():
+    task = plane_task()
+    env = SwirlWrapper(PointEnv(dim=2, step_size=0.25, jitter=0.1), task)
+    rng = np.random.default_rng(0)
+    obs, info = env.reset(seed=3)
+    states, segments = [obs[:2]], [info["segment"]]
+    for _ in range(40):
+        obs, *_, info = env.step(int(rng.integers(5)))
+        states.append(obs[:2])
+        segments.append(info["segment"])
+    assert segments[-1] > 0
+    np.testing.assert_array_equal(segments, task.segment_indices(np.array(states)))
+
+
+def test_dict_observations_get_a_segment_key():
+    env = SwirlWrapper(PointEnv(as_dict=True), line_task(), region_bonus=1.0)
+    assert set(env.observation_space.spaces) == {"observation", "goal", "segment"}
+    assert env.observation_space["segment"] == spaces.Box(0.0, 1.0, (3,), dtype=np.float32)
+    obs, _ = env.reset()
+    np.testing.assert_array_equal(obs["segment"], [1.0, 0.0, 0.0])
+    env.step(UP)
+    obs, reward, *_, info = env.step(UP)
+    np.testing.assert_array_equal(obs["segment"], [0.0, 1.0, 0.0])
+    np.testing.assert_array_equal(obs["goal"], [0.5, 0.5])
+    assert reward == 1.0 and info["segment"] == 1
+    obs["segment"][:] = 7.0  # the returned one-hot is the caller's to keep
+    assert env.step(STAY)[0]["segment"].tolist() == [0.0, 1.0, 0.0]
+
+
+def test_dict_state_key_picks_the_state():
+    env = PointEnv(as_dict=True)
+    task = TaskModel([Region([0.5], [[0.01]], 1.0)], [QuadraticReward([0.5], [[1.0]])], dims=[1])
+    wrapped = SwirlWrapper(env, task, state_key="goal")
+    wrapped.reset()
+    assert wrapped.segment == 1  # goal is (0.5, 0.5): dims=[1] of it is in the region
+
+
+# ----------------------------------------------------------------------- validation
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: SwirlWrapper(gym.make("FrozenLake-v1"), line_task()), "Box or Dict"),
+        (lambda: SwirlWrapper(PointEnv(dim=2), line_task()), "task expects 1"),
+        (
+            lambda: SwirlWrapper(
+                PointEnv(),
+                TaskModel(
+                    [Region([0.0], [[1.0]], 1.0)], [QuadraticReward([0.0], [[1.0]])], dims=[3]
+                ),
+            ),
+            "uses index 3",
+        ),
+        (lambda: SwirlWrapper(PointEnv(), line_task(), state_key="observation"), "only for Dict"),
+        (lambda: SwirlWrapper(PointEnv(as_dict=True), line_task(), state_key="x"), "not in the"),
+        (lambda: SwirlWrapper(PointEnv(), line_task(), reward_scale=np.nan), "reward_scale"),
+        (lambda: SwirlWrapper(PointEnv(), line_task(), region_bonus="a"), "region_bonus"),
+        (lambda: SwirlWrapper(PointEnv(), "task.json"), "TaskModel"),
+    ],
+)
+def test_invalid_construction(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+def test_invalid_observation_spaces():
+    task = line_task()
+    with pytest.raises(ValueError, match="1-D Box"):
+        SwirlWrapper(_ImageEnv(), task)
+    no_obs_key = _ImageEnv(dict_keys=("state",))
+    with pytest.raises(ValueError, match="no 'observation' key"):
+        SwirlWrapper(no_obs_key, task)
+    with pytest.raises(ValueError, match="already has a 'segment'"):
+        SwirlWrapper(_ImageEnv(dict_keys=("observation", "segment")), task)
+
+
+class _ImageEnv(gym.Env):
+    def __init__(self, dict_keys=()):
+        box = spaces.Box(0, 255, (4, 4), dtype=np.uint8)
+        self.observation_space = (
+            spaces.Dict({k: spaces.Box(-1.0, 1.0, (1,)) for k in dict_keys}) if dict_keys else box
+        )
+        self.action_space = spaces.Discrete(2)
+
+
+# ----------------------------------------------------------------------- checkers, pickling
+def _acrobot_task() -> TaskModel:
+    # cos/sin of the two angles: hanging down, then the first link horizontal.
+    regions = [Region([1.0, 0.0], np.eye(2) * 0.01, 9.0), Region([0.0, 1.0], np.eye(2) * 0.05, 9.0)]
+    rewards = [QuadraticReward(r.mean, np.eye(2)) for r in regions]
+    return TaskModel(regions, rewards, dims=(0, 1))
+
+
+def _cartpole_task() -> TaskModel:
+    regions = [Region([0.0, 0.0], np.eye(2) * 0.05**2, 1.0), Region([1.0, 0.0], np.eye(2), 1.0)]
+    rewards = [QuadraticReward(r.mean, np.eye(2)) for r in regions]
+    return TaskModel(regions, rewards, dims=(0, 2))
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: SwirlWrapper(gym.make("Acrobot-v1"), _acrobot_task(), region_bonus=1.0),
+        lambda: SwirlWrapper(gym.make("CartPole-v1"), _cartpole_task(), reward_scale=0.1),
+        lambda: SwirlWrapper(PointEnv(as_dict=True, jitter=0.5), line_task()),
+    ],
+    ids=["acrobot", "cartpole", "point-dict"],
+)
+def test_env_checkers_pass(make):
+    with warnings.catch_warnings():
+        # gymnasium recommends checking the unwrapped env; checking the wrapper is the point here.
+        warnings.filterwarnings("error", message=".*WARN.*")
+        warnings.filterwarnings("ignore", message=".*different from the unwrapped version")
+        warnings.filterwarnings("ignore", message=".*infinity")  # CartPole's own unbounded Box
+        gym_check_env(make(), skip_render_check=True)
+    sb3_check_env(make(), warn=False)
+
+
+def test_pickle_round_trip_continues_identically():
+    env = SwirlWrapper(gym.make("CartPole-v1"), _cartpole_task(), region_bonus=2.0)
+    env.reset(seed=1)
+    for _ in range(3):
+        env.step(1)
+    clone = pickle.loads(pickle.dumps(env))
+    assert clone.segment == env.segment and clone.task.to_dict() == env.task.to_dict()
+    for action in (0, 0, 1, 0):
+        a, b = env.step(action), clone.step(action)
+        np.testing.assert_array_equal(a[0], b[0])
+        assert a[1:4] == b[1:4] and a[4]["segment"] == b[4]["segment"]
+
+
+def test_recreatable_from_spec():
+    env = SwirlWrapper(gym.make("CartPole-v1"), _cartpole_task(), reward_scale=0.5)
+    spec = env.spec
+    assert spec.additional_wrappers[-1].kwargs["reward_scale"] == 0.5
+    again = gym.make(spec)
+    assert isinstance(again, SwirlWrapper) and again.reward_scale == 0.5
+    assert again.task.to_dict() == env.task.to_dict()
+
+
+def test_sb3_dummy_and_subproc_vec_envs():
+    task = _cartpole_task()
+    kwargs = {"task": task, "region_bonus": 1.0}
+    for cls in (DummyVecEnv, SubprocVecEnv):
+        venv = make_vec_env(
+            "CartPole-v1",
+            n_envs=2,
+            seed=0,
+            wrapper_class=SwirlWrapper,
+            wrapper_kwargs=kwargs,
+            vec_env_cls=cls,
+        )
+        try:
+            obs = venv.reset()
+            assert obs.shape == (2, 7)
+            assert venv.get_attr("segment") == [int(np.argmax(o[4:])) for o in obs]
+            for _ in range(3):
+                obs, rewards, _, infos = venv.step(np.array([0, 1]))
+                for o, r, info in zip(obs, rewards, infos, strict=True):
+                    assert info["task_reward"] == 1.0
+                    assert r == pytest.approx(info["segment_reward"], rel=1e-6)
+                    assert o[4 + info["segment"]] == 1.0 and o[4:].sum() == 1.0
+        finally:
+            venv.close()
+
+
+# ----------------------------------------------------------------------- vector equivalence
+N_ENVS = 4
+
+
+def _make_point(as_dict: bool):
+    def make():
+        # Short episodes and a wall at |x| = 1 give both truncations and terminations.
+        return PointEnv(dim=2, step_size=0.25, jitter=0.2, limit=1.0, max_steps=9, as_dict=as_dict)
+
+    return make
+
+
+SWIRL_KWARGS = {"reward_scale": 2.0, "region_bonus": 3.0}
+
+
+def _actions(steps: int) -> np.ndarray:
+    return np.random.default_rng(42).integers(0, 5, size=(steps, N_ENVS))
+
+
+def _assert_obs_equal(a, b):
+    if isinstance(a, dict):
+        assert set(a) == set(b)
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key])
+    else:
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("as_dict", [False, True], ids=["box", "dict"])
+def test_swirl_vec_env_matches_independent_wrappers(as_dict):
+    task = plane_task()
+    make = _make_point(as_dict)
+    reference = DummyVecEnv([lambda: SwirlWrapper(make(), task, **SWIRL_KWARGS)] * N_ENVS)
+    vectorised = SwirlVecEnv(DummyVecEnv([make] * N_ENVS), task, **SWIRL_KWARGS)
+    reference.seed(7)
+    vectorised.seed(7)
+    _assert_obs_equal(vectorised.reset(), reference.reset())
+    assert [i["segment"] for i in vectorised.reset_infos] == reference.get_attr("segment")
+    n_done, segments = 0, set()
+    for actions in _actions(60):
+        ref = reference.step(actions)
+        got = vectorised.step(actions)
+        _assert_obs_equal(got[0], ref[0])
+        np.testing.assert_allclose(got[1], ref[1], rtol=1e-6)
+        np.testing.assert_array_equal(got[2], ref[2])
+        for g, r in zip(got[3], ref[3], strict=True):
+            assert g["segment"] == r["segment"] and g["task_reward"] == r["task_reward"]
+            assert g["segment_reward"] == pytest.approx(r["segment_reward"], rel=1e-12)
+            assert g.get("TimeLimit.truncated") == r.get("TimeLimit.truncated")
+            if "terminal_observation" in r:
+                _assert_obs_equal(g["terminal_observation"], r["terminal_observation"])
+            segments.add(g["segment"])
+        n_done += int(np.sum(got[2]))
+    assert n_done >= 10 and segments >= {0, 1, 2}  # resets and region entries were exercised
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+@pytest.mark.parametrize("as_dict", [False, True], ids=["box", "dict"])
+def test_swirl_vector_wrapper_matches_independent_wrappers(mode, as_dict):
+    task = plane_task()
+    make = _make_point(as_dict)
+    reference = SyncVectorEnv(
+        [lambda: SwirlWrapper(make(), task, **SWIRL_KWARGS)] * N_ENVS, autoreset_mode=mode
+    )
+    vectorised = SwirlVectorWrapper(
+        SyncVectorEnv([make] * N_ENVS, autoreset_mode=mode), task, **SWIRL_KWARGS
+    )
+    assert vectorised.single_observation_space == reference.single_observation_space
+    assert vectorised.observation_space == reference.observation_space
+    got_obs, got_info = vectorised.reset(seed=11)
+    ref_obs, ref_info = reference.reset(seed=11)
+    _assert_obs_equal(got_obs, ref_obs)
+    np.testing.assert_array_equal(got_info["segment"], ref_info["segment"])
+    n_done = 0
+    for actions in _actions(60):
+        got = vectorised.step(actions)
+        ref = reference.step(actions)
+        _assert_obs_equal(got[0], ref[0])
+        assert got[0] in vectorised.observation_space
+        np.testing.assert_allclose(got[1], ref[1], rtol=1e-12)
+        np.testing.assert_array_equal(got[2], ref[2])
+        np.testing.assert_array_equal(got[3], ref[3])
+        np.testing.assert_array_equal(got[4]["segment"], ref[4]["segment"])
+        if "task_reward" in ref[4]:  # absent when every sub-env was resetting this step
+            stepped = ref[4]["_task_reward"]
+            np.testing.assert_array_equal(
+                got[4]["task_reward"][stepped], ref[4]["task_reward"][stepped]
+            )
+        if "final_obs" in ref[4]:
+            for i in np.flatnonzero(ref[4]["_final_obs"]):
+                _assert_obs_equal(got[4]["final_obs"][i], ref[4]["final_obs"][i])
+        n_done += int(np.sum(got[2] | got[3]))
+    assert n_done >= 10
+    vectorised.close()
+    reference.close()
+
+
+def test_vector_wrappers_refuse_terminate_on_completion():
+    with pytest.raises(ValueError, match="SwirlWrapper"):
+        SwirlVecEnv(DummyVecEnv([PointEnv]), line_task(), terminate_on_completion=True)
+    with pytest.raises(ValueError, match="SwirlWrapper"):
+        SwirlVectorWrapper(SyncVectorEnv([PointEnv]), line_task(), terminate_on_completion=True)
+
+
+def test_vector_partial_reset_with_mask():
+    envs = SwirlVectorWrapper(
+        SyncVectorEnv([PointEnv, PointEnv], autoreset_mode=AutoresetMode.DISABLED), line_task()
+    )
+    envs.reset(seed=0)
+    envs.step(np.array([UP, UP]))
+    envs.step(np.array([UP, UP]))
+    assert envs.tracker.index.tolist() == [1, 1] and envs.tracker.t.tolist() == [2, 2]
+    _, info = envs.reset(options={"reset_mask": np.array([True, False])})
+    assert info["segment"].tolist() == [0, 1] and envs.tracker.t.tolist() == [0, 2]
+
+
+def test_all_wrappers_expose_the_task():
+    task = line_task()
+    assert SwirlWrapper(PointEnv(), task).task is task
+    assert SwirlVecEnv(DummyVecEnv([PointEnv]), task).task is task
+    assert SwirlVectorWrapper(SyncVectorEnv([PointEnv]), task).task is task
+    assert SegmentTracker(task, 2, PointEnv().observation_space).task is task
+
+
+# ----------------------------------------------------------------------- fuzzing
+@st.composite
+def tasks_on_points(draw):
+    obs_dim = draw(st.integers(1, 4))
+    p = draw(st.integers(1, obs_dim))
+    dims = draw(st.permutations(range(obs_dim)))[:p]
+    k = draw(st.integers(1, 4))
+    seed = draw(st.integers(0, 2**31 - 1))
+    rng = np.random.default_rng(seed)
+    regions, rewards = [], []
+    for _ in range(k):
+        a = rng.normal(size=(p, p)) * draw(st.floats(0.05, 2.0))
+        bounds = None
+        if draw(st.booleans()):
+            lo = draw(st.integers(0, 10))
+            bounds = (lo, lo + draw(st.integers(0, 20)))
+        regions.append(
+            Region(
+                rng.uniform(-1.5, 1.5, p), a @ a.T + 1e-3 * np.eye(p), rng.uniform(0.5, 9), bounds
+            )
+        )
+        b = rng.normal(size=(p, draw(st.integers(1, p))))
+        rewards.append(QuadraticReward(rng.uniform(-1.5, 1.5, p), b @ b.T))
+    task = TaskModel(regions, rewards, dims=dims)
+    kwargs = {
+        "reward_scale": draw(st.floats(-5, 5, allow_nan=False)),
+        "region_bonus": draw(st.floats(0, 10)),
+        "terminate_on_completion": draw(st.booleans()),
+    }
+    return obs_dim, task, kwargs, seed
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(tasks_on_points())
+def test_fuzz_wrapper_invariants(case):
+    obs_dim, task, kwargs, seed = case
+    env = SwirlWrapper(
+        PointEnv(dim=obs_dim, step_size=0.3, jitter=1.0, limit=3.0, max_steps=25), task, **kwargs
+    )
+    rng = np.random.default_rng(seed)
+    obs, info = env.reset(seed=seed)
+    for _ in range(60):
+        assert obs in env.observation_space
+        before = info["segment"]
+        assert 0 <= before <= task.n_segments
+        obs, reward, terminated, truncated, info = env.step(int(rng.integers(2 * obs_dim + 1)))
+        after = info["segment"]
+        assert before <= after <= min(before + 1, task.n_segments)
+        assert np.isfinite(reward)
+        want = kwargs["reward_scale"] * float(task.reward(obs[:obs_dim], before))
+        want += kwargs["region_bonus"] * (after > before)
+        assert reward == pytest.approx(want, rel=1e-9, abs=1e-9)
+        assert np.argmax(obs[obs_dim:]) == after
+        if kwargs["terminate_on_completion"] and after == task.n_segments and after > before:
+            assert terminated
+        if terminated or truncated:
+            obs, info = env.reset()

@@ -1,0 +1,551 @@
+"""Gymnasium wrappers that put a SWIRL proxy task on an environment.
+
+The agent of SWIRL (paper §7, Algorithm 3) learns in a lifted state: the observation plus a one-hot
+segment index. Each wrapper here tracks that index with the task's Markov segmentation function
+and replaces the reward with the current segment's local reward.
+
+Timing, the same in every wrapper (and in :meth:`TaskModel.segment_indices`):
+
+* on reset, ``t = 0`` and the index starts at 0, then the segmentation function is applied to the
+  initial state once, so an episode that starts inside region 0 starts at index 1;
+* on each step, ``t`` grows by one, the reward is ``reward_scale * R_i(s')`` with ``i`` the index
+  *before* the step (Algorithm 3: observe ``R_i``, update the state, then advance if
+  ``s' in rho_i``), plus ``region_bonus`` when ``s'`` reaches region ``i``; then the index
+  advances and the returned observation carries the new index;
+* after the last region (index ``k``), the reward stays that of segment ``k - 1``.
+
+``info`` gets ``"segment"`` (index after the step), ``"task_reward"`` (the environment's own
+reward) and ``"segment_reward"`` (the reward the wrapper returns); the reset ``info`` gets
+``"segment"``. The environment's own info keys pass through.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
+from gymnasium.vector.utils import batch_space
+
+from swirl_wrappers.task import TaskModel
+
+__all__ = [
+    "SegmentTracker",
+    "SwirlVectorWrapper",
+    "SwirlWrapper",
+    "lift_observation",
+    "lift_observation_space",
+]
+
+SEGMENT_KEY = "segment"
+
+
+def lift_observation_space(
+    space: gym.Space, task: TaskModel, state_key: str | None = None
+) -> tuple[spaces.Box | spaces.Dict, str | None]:
+    """Check that ``task`` fits observations from ``space`` and build the lifted space.
+
+    Parameters
+    ----------
+    space : gymnasium.spaces.Box or gymnasium.spaces.Dict
+        The environment's (single) observation space. A Box must be 1-D; a Dict must hold a
+        1-D Box under ``state_key`` and no ``"segment"`` key.
+    task : TaskModel
+    state_key : str, optional
+        For Dict spaces, the key of the state the task reads; default ``"observation"``.
+
+    Returns
+    -------
+    lifted : Box or Dict
+        Box: ``low``/``high`` extended with ``task.n_indices`` zeros/ones, same dtype. Dict: the
+        same keys plus ``"segment"``, a ``Box(0, 1, (task.n_indices,), float32)``.
+    state_key : str or None
+        The key to read the task state from (``None`` for Box spaces).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from gymnasium import spaces
+    >>> from swirl_wrappers import QuadraticReward, Region, TaskModel, lift_observation_space
+    >>> region, reward = Region([0.5], [[0.01]], 4.0), QuadraticReward([0.5], [[1.0]])
+    >>> task = TaskModel([region], [reward], dims=[2])
+    >>> lifted, key = lift_observation_space(spaces.Box(-1.0, 1.0, (3,)), task)
+    >>> lifted.low, key
+    (array([-1., -1., -1.,  0.,  0.], dtype=float32), None)
+    """
+    if not isinstance(task, TaskModel):
+        raise ValueError(f"task must be a swirl_wrappers.TaskModel, got {type(task).__name__}")
+    n = task.n_indices
+    if isinstance(space, spaces.Box):
+        if state_key is not None:
+            raise ValueError(
+                f"state_key={state_key!r} is only for Dict observation spaces; this one is a Box"
+            )
+        _check_state_space(space, task, "observation space")
+        lifted = spaces.Box(
+            low=np.concatenate([space.low, np.zeros(n, dtype=space.dtype)]),
+            high=np.concatenate([space.high, np.ones(n, dtype=space.dtype)]),
+            dtype=space.dtype,
+        )
+        return lifted, None
+    if isinstance(space, spaces.Dict):
+        if state_key is None:
+            if "observation" not in space.spaces:
+                raise ValueError(
+                    "Dict observation space has no 'observation' key; pass state_key= naming "
+                    f"the task state, one of {sorted(space.spaces)}"
+                )
+            state_key = "observation"
+        if state_key not in space.spaces:
+            raise ValueError(
+                f"state_key {state_key!r} is not in the observation space; keys are "
+                f"{sorted(space.spaces)}"
+            )
+        if SEGMENT_KEY in space.spaces:
+            raise ValueError(f"Dict observation space already has a {SEGMENT_KEY!r} key")
+        _check_state_space(space.spaces[state_key], task, f"observation space[{state_key!r}]")
+        segment = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
+        return spaces.Dict({**space.spaces, SEGMENT_KEY: segment}), state_key
+    raise ValueError(
+        f"SWIRL wrappers need a Box or Dict observation space, got {type(space).__name__}"
+    )
+
+
+def _check_state_space(space: gym.Space, task: TaskModel, name: str) -> None:
+    if not isinstance(space, spaces.Box) or len(space.shape) != 1:
+        raise ValueError(
+            f"{name} must be a 1-D Box to hold the task state, got {space}; flatten it first "
+            "(gymnasium.wrappers.FlattenObservation)"
+        )
+    try:
+        task.check_state_dim(space.shape[0])
+    except ValueError as exc:
+        raise ValueError(f"task does not fit the {name} {space}: {exc}") from exc
+
+
+def _check_scalars(reward_scale: float, region_bonus: float) -> tuple[float, float]:
+    values = []
+    for name, value in (("reward_scale", reward_scale), ("region_bonus", region_bonus)):
+        try:
+            value = float(value)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{name} must be a number, got {value!r}") from exc
+        if not math.isfinite(value):
+            raise ValueError(f"{name} must be finite, got {value}")
+        values.append(value)
+    return values[0], values[1]
+
+
+def _one_hot_table(lifted: spaces.Box | spaces.Dict, state_key: str | None, n: int) -> np.ndarray:
+    dtype = lifted.dtype if state_key is None else lifted[SEGMENT_KEY].dtype
+    table = np.eye(n, dtype=dtype)
+    table.flags.writeable = False
+    return table
+
+
+def lift_observation(obs: Any, one_hot: np.ndarray, state_key: str | None) -> Any:
+    """Append one-hot segment rows to an observation or a batch of observations.
+
+    ``one_hot`` has shape (n_indices,) for one observation, (n, n_indices) for a batch; Box
+    observations get it concatenated on the last axis, Dict observations as a ``"segment"`` key.
+    """
+    if state_key is None:
+        return np.concatenate((obs, one_hot), axis=-1)
+    return {**obs, SEGMENT_KEY: np.array(one_hot)}
+
+
+class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Track the segment of a SWIRL proxy task and reward the agent with its local reward.
+
+    The observation gets a one-hot segment index appended (Box observations) or a ``"segment"``
+    key (Dict observations); the reward becomes ``reward_scale * R_i(s')`` (+ ``region_bonus``
+    on the step a region is reached), with ``i`` the index before the step. See the module
+    docstring for the exact timing and the ``info`` keys.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        Environment with a 1-D Box or a Dict observation space.
+    task : TaskModel
+        The proxy task; its ``dims`` / features must fit the observation.
+    reward_scale : float
+        Multiplies the segment reward.
+    region_bonus : float
+        Added to the reward of a step that reaches the next region.
+    terminate_on_completion : bool
+        End the episode (``terminated=True``) when the last region is reached.
+    state_key : str, optional
+        For Dict observations, the key holding the task state (default ``"observation"``).
+
+    Attributes
+    ----------
+    task : TaskModel
+    segment : int
+        The current segment index, in ``0 .. task.n_segments``.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import numpy as np
+    >>> from swirl_wrappers import QuadraticReward, Region, SwirlWrapper, TaskModel
+    >>> task = TaskModel(  # region 0: the pole within 0.05 rad of upright; reward: keep it at 0
+    ...     regions=[Region(mean=[0.0], covariance=[[0.05**2]], threshold=1.0)],
+    ...     rewards=[QuadraticReward(target=[0.0], weight=[[100.0]])],
+    ...     dims=[2],
+    ... )
+    >>> env = SwirlWrapper(gym.make("CartPole-v1"), task, region_bonus=1.0)
+    >>> env.observation_space.shape
+    (6,)
+    >>> obs, info = env.reset(seed=0)
+    >>> obs[4:], info["segment"]
+    (array([0., 1.], dtype=float32), 1)
+    >>> obs, reward, terminated, truncated, info = env.step(0)
+    >>> sorted(k for k in info if k != "episode")
+    ['segment', 'segment_reward', 'task_reward']
+    >>> info["task_reward"], reward == info["segment_reward"]
+    (1.0, True)
+    >>> bool(np.isclose(reward, -100.0 * float(obs[2]) ** 2))  # R_1 = R_0 once all are reached
+    True
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        task: TaskModel,
+        reward_scale: float = 1.0,
+        region_bonus: float = 0.0,
+        terminate_on_completion: bool = False,
+        state_key: str | None = None,
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self,
+            task=task,
+            reward_scale=reward_scale,
+            region_bonus=region_bonus,
+            terminate_on_completion=terminate_on_completion,
+            state_key=state_key,
+        )
+        gym.Wrapper.__init__(self, env)
+        self.observation_space, self._state_key = lift_observation_space(
+            env.observation_space, task, state_key
+        )
+        self.task = task
+        self.reward_scale, self.region_bonus = _check_scalars(reward_scale, region_bonus)
+        self.terminate_on_completion = bool(terminate_on_completion)
+        self._one_hot = _one_hot_table(self.observation_space, self._state_key, task.n_indices)
+        self.segment = 0
+        self._t = 0
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        state = obs if self._state_key is None else obs[self._state_key]
+        self._t = 0
+        _, self.segment = self.task.reward_and_next(state, 0, 0)
+        info[SEGMENT_KEY] = self.segment
+        return lift_observation(obs, self._one_hot[self.segment], self._state_key), info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, task_reward, terminated, truncated, info = self.env.step(action)
+        state = obs if self._state_key is None else obs[self._state_key]
+        self._t += 1
+        before = self.segment
+        reward, self.segment = self.task.reward_and_next(state, self._t, before)
+        reward *= self.reward_scale
+        if self.segment != before:
+            reward += self.region_bonus
+            if self.terminate_on_completion and self.segment == self.task.n_segments:
+                terminated = True
+        info[SEGMENT_KEY] = self.segment
+        info["task_reward"] = task_reward
+        info["segment_reward"] = reward
+        lifted = lift_observation(obs, self._one_hot[self.segment], self._state_key)
+        return lifted, reward, terminated, truncated, info
+
+
+class SegmentTracker:
+    """Segment indices and time steps of ``num_envs`` parallel episodes, updated in numpy.
+
+    The vectorised core of :class:`SwirlVectorWrapper` and of sb3-swirl's ``SwirlVecEnv``: it
+    validates the task against the observation space, holds one index and one step counter per
+    sub-environment, applies the timing described in the module docstring to all of them at
+    once, and lifts batches of observations.
+
+    Parameters
+    ----------
+    task : TaskModel
+    num_envs : int
+    observation_space : gymnasium.spaces.Box or gymnasium.spaces.Dict
+        The observation space of *one* sub-environment.
+    reward_scale, region_bonus, state_key
+        As in :class:`SwirlWrapper`.
+
+    Attributes
+    ----------
+    observation_space : Box or Dict
+        The lifted observation space of one sub-environment.
+    state_key : str or None
+        Key of the task state in Dict observations.
+    index : ndarray of int64, shape (num_envs,)
+        Current segment index of each sub-environment.
+    t : ndarray of int64, shape (num_envs,)
+        Steps taken in each sub-environment's current episode.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from gymnasium import spaces
+    >>> from swirl_wrappers import QuadraticReward, Region, SegmentTracker, TaskModel
+    >>> task = TaskModel([Region([1.0], [[0.01]], 1.0)], [QuadraticReward([1.0], [[1.0]])])
+    >>> space = spaces.Box(-10.0, 10.0, (1,))
+    >>> tracker = SegmentTracker(task, 2, space, region_bonus=10.0)
+    >>> tracker.reset(np.array([[0.0], [0.0]]))
+    >>> tracker.step(np.array([[0.5], [1.0]])).tolist(), tracker.index.tolist()
+    ([-0.25, 10.0], [0, 1])
+    >>> tracker.step(np.array([[0.7], [7.0]]), restart=np.array([True, False])).tolist()
+    [0.0, -36.0]
+    >>> tracker.index.tolist(), tracker.t.tolist()
+    ([0, 1], [0, 2])
+    >>> tracker.lift(np.array([[0.7], [7.0]], dtype=np.float32))
+    array([[0.7, 1. , 0. ],
+           [7. , 0. , 1. ]], dtype=float32)
+    """
+
+    def __init__(
+        self,
+        task: TaskModel,
+        num_envs: int,
+        observation_space: gym.Space,
+        reward_scale: float = 1.0,
+        region_bonus: float = 0.0,
+        state_key: str | None = None,
+    ) -> None:
+        self.observation_space, self.state_key = lift_observation_space(
+            observation_space, task, state_key
+        )
+        if int(num_envs) < 1:
+            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        self.task = task
+        self.num_envs = int(num_envs)
+        self.reward_scale, self.region_bonus = _check_scalars(reward_scale, region_bonus)
+        self.index = np.zeros(self.num_envs, dtype=np.int64)
+        self.ended_index = self.index
+        self.t = np.zeros(self.num_envs, dtype=np.int64)
+        self._one_hot = _one_hot_table(self.observation_space, self.state_key, task.n_indices)
+
+    def states(self, obs: Any) -> np.ndarray:
+        """The task states in a batch of (unlifted) observations."""
+        return obs if self.state_key is None else obs[self.state_key]
+
+    def reset(self, states: np.ndarray, mask: np.ndarray | None = None) -> None:
+        """Start new episodes from ``states`` (num_envs, state_dim) where ``mask`` is true.
+
+        ``t`` becomes 0 and the index ``M(s_0, 0, 0)`` (1 if ``s_0`` is already in region 0).
+        """
+        if mask is None:
+            mask = np.ones(self.num_envs, dtype=bool)
+        zeros = np.zeros(int(np.count_nonzero(mask)), dtype=np.int64)
+        # New arrays, not in-place writes: earlier infos may hold the old ones.
+        self.t, self.index = self.t.copy(), self.index.copy()
+        self.t[mask] = 0
+        self.index[mask] = self.task.reward_and_next_batch(states[mask], zeros, zeros)[1]
+        self.ended_index = self.index
+
+    def step(
+        self,
+        states: np.ndarray,
+        restart: np.ndarray | None = None,
+        final_states: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Advance every episode to ``states`` and return the float64 segment rewards.
+
+        Parameters
+        ----------
+        states : array of shape (num_envs, state_dim)
+        restart : bool array of shape (num_envs,), optional
+            Rows whose ``states`` start a new episode (an autoreset). They are reset as by
+            :meth:`reset`, in the same numpy pass as the other rows.
+        final_states : array of shape (restart.sum(), state_dim), optional
+            The last states of the episodes that ended at the ``restart`` rows, when the
+            environment resets in the step that ends an episode (SB3, gymnasium ``SAME_STEP``):
+            the reward of those rows is that of the final transition. Without it (gymnasium
+            ``NEXT_STEP``) the ``restart`` rows made no transition and get reward 0.
+
+        After the call :attr:`index` holds the indices of the current episodes and
+        ``ended_index`` the index each row's transition ended with (they differ only at
+        ``restart`` rows with ``final_states``).
+        """
+        before = self.index
+        self.t += 1
+        if restart is None or not restart.any():
+            reward, self.index = self.task.reward_and_next_batch(states, self.t, before)
+            self.ended_index = self.index
+            return self._shape(reward, before, self.index)
+        rows = np.flatnonzero(restart)
+        # Index 0 at t = 0 makes the restart rows compute exactly reset's M(s_0, 0, 0).
+        t, index = self.t.copy(), before.copy()
+        t[rows] = 0
+        index[rows] = 0
+        if final_states is None:
+            reward, self.index = self.task.reward_and_next_batch(states, t, index)
+            reward = self._shape(reward, index, self.index)
+            reward[rows] = 0.0
+            self.ended_index, self.t = self.index, t
+            return reward
+        # One pass over the num_envs current states and the final states of ended episodes.
+        n = self.num_envs
+        reward, nxt = self.task.reward_and_next_batch(
+            np.concatenate((states, final_states)),
+            np.concatenate((t, self.t[rows])),
+            np.concatenate((index, before[rows])),
+        )
+        self.index, self.t = nxt[:n], t
+        self.ended_index = nxt[:n].copy()
+        self.ended_index[rows] = nxt[n:]
+        step_reward = reward[:n].copy()
+        step_reward[rows] = reward[n:]
+        return self._shape(step_reward, before, self.ended_index)
+
+    def _shape(self, reward: np.ndarray, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+        if self.reward_scale != 1.0:
+            reward = reward * self.reward_scale
+        if self.region_bonus != 0.0:
+            reward = reward + self.region_bonus * (after != before)
+        return reward
+
+    def lift(self, obs: Any, index: np.ndarray | int | None = None) -> Any:
+        """Append segment one-hots to a batch of observations (or to one, with an int ``index``).
+
+        ``index`` defaults to the current indices of all sub-environments.
+        """
+        return lift_observation(
+            obs, self._one_hot[self.index if index is None else index], self.state_key
+        )
+
+
+class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
+    """:class:`SwirlWrapper` for gymnasium vector environments, vectorised across sub-envs.
+
+    Handles the three autoreset modes of gymnasium 1.x: ``NEXT_STEP`` (the default: the step
+    after a done returns the reset observation, with reward 0 here too), ``SAME_STEP`` (the
+    reward of a done sub-env is that of its final transition, the final observation in
+    ``infos["final_obs"]`` is lifted with the index it ended with, and ``infos["segment"]`` is
+    the new episode's index, as a reset info would say) and ``DISABLED`` (reset sub-envs with
+    ``reset(options={"reset_mask": mask})``). ``infos`` gets ``"segment"``, ``"task_reward"``
+    and ``"segment_reward"`` arrays (with their ``"_"`` masks). The results equal those of a
+    vector env of :class:`SwirlWrapper` s, in one numpy pass over the sub-envs.
+
+    ``terminate_on_completion`` needs the sub-environment to be reset, which a vector wrapper
+    cannot do; wrap each sub-env with :class:`SwirlWrapper` instead (``gymnasium.make_vec(...,
+    wrappers=[...])``).
+
+    Parameters
+    ----------
+    env : gymnasium.vector.VectorEnv
+    task, reward_scale, region_bonus, state_key
+        As in :class:`SwirlWrapper`.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> from swirl_wrappers import QuadraticReward, Region, SwirlVectorWrapper, TaskModel
+    >>> task = TaskModel(
+    ...     regions=[Region(mean=[0.0], covariance=[[0.01**2]], threshold=9.0)],
+    ...     rewards=[QuadraticReward(target=[0.0], weight=[[100.0]])],
+    ...     dims=[2],
+    ... )
+    >>> envs = SwirlVectorWrapper(gym.make_vec("CartPole-v1", num_envs=3), task)
+    >>> obs, infos = envs.reset(seed=0)
+    >>> obs.shape, infos["segment"].tolist()
+    ((3, 6), [1, 1, 1])
+    >>> obs, rewards, terminations, truncations, infos = envs.step(envs.action_space.sample())
+    >>> bool((rewards == -100.0 * obs[:, 2].astype(float) ** 2).all())
+    True
+    >>> envs.close()
+    """
+
+    def __init__(
+        self,
+        env: VectorEnv,
+        task: TaskModel,
+        reward_scale: float = 1.0,
+        region_bonus: float = 0.0,
+        terminate_on_completion: bool = False,
+        state_key: str | None = None,
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self,
+            task=task,
+            reward_scale=reward_scale,
+            region_bonus=region_bonus,
+            terminate_on_completion=terminate_on_completion,
+            state_key=state_key,
+        )
+        VectorWrapper.__init__(self, env)
+        if terminate_on_completion:
+            raise ValueError(
+                "SwirlVectorWrapper cannot end one sub-environment's episode on completion; wrap "
+                "each sub-env with SwirlWrapper(..., terminate_on_completion=True) instead"
+            )
+        self.autoreset_mode = AutoresetMode(
+            env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
+        )
+        self.tracker = SegmentTracker(
+            task, self.num_envs, env.single_observation_space, reward_scale, region_bonus, state_key
+        )
+        self.single_observation_space = self.tracker.observation_space
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.task = task
+        self._autoreset = np.zeros(self.num_envs, dtype=bool)
+        self._all = np.ones(self.num_envs, dtype=bool)
+
+    def reset(
+        self,
+        *,
+        seed: int | list[int | None] | None = None,
+        options: dict[str, Any] | None = None,
+    ) -> tuple[Any, dict[str, Any]]:
+        mask = None if options is None else options.get("reset_mask")
+        obs, infos = self.env.reset(seed=seed, options=options)
+        mask = self._all if mask is None else np.asarray(mask, dtype=bool)
+        self.tracker.reset(self.tracker.states(obs), mask)
+        self._autoreset[mask] = False
+        infos[SEGMENT_KEY] = self.tracker.index.copy()
+        infos["_" + SEGMENT_KEY] = self._all.copy()
+        return self.tracker.lift(obs), infos
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        obs, task_rewards, terminations, truncations, infos = self.env.step(actions)
+        states = self.tracker.states(obs)
+        done = np.logical_or(terminations, truncations)
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            rewards = self.tracker.step(states, restart=self._autoreset)
+            self._autoreset = done
+        elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            # A done row holds the next episode's first observation; the transition ends in
+            # infos["final_obs"], which is lifted with the index the episode ended with.
+            final = np.flatnonzero(done)
+            final_obs = infos["final_obs"]
+            rewards = self.tracker.step(
+                states, done, np.stack([self.tracker.states(final_obs[i]) for i in final])
+            )
+            for i in final:
+                final_obs[i] = self.tracker.lift(final_obs[i], self.tracker.ended_index[i])
+        else:
+            rewards = self.tracker.step(states)
+        infos[SEGMENT_KEY] = self.tracker.index.copy()
+        infos["task_reward"] = np.asarray(task_rewards).copy()
+        infos["segment_reward"] = rewards.copy()
+        for key in (SEGMENT_KEY, "task_reward", "segment_reward"):
+            infos["_" + key] = self._all.copy()
+        return (
+            self.tracker.lift(obs),
+            rewards,
+            terminations,
+            truncations,
+            infos,
+        )
