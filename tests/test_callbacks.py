@@ -1,0 +1,109 @@
+"""SegmentProgressCallback and TaskEvalCallback with SwirlDQN, PPO and plain DQN."""
+
+from __future__ import annotations
+
+import csv
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3 import DQN, PPO
+from stable_baselines3.common.logger import configure
+from test_dqn import PointEnv, point_demos, point_env
+
+from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
+from sb3_swirl.dqn import SwirlDQN
+
+
+def logged(path) -> dict[str, list[str]]:
+    with open(path / "progress.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return {key: [row[key] for row in rows if row[key] != ""] for key in rows[0]}
+
+
+def test_segment_progress_keys_reach_the_logger(tmp_path):
+    model = SwirlDQN(
+        "MlpPolicy", point_env(), demonstrations=point_demos(3), bc_epochs=100, seed=0,
+        exploration_initial_eps=0.05, learning_starts=500,
+    )  # fmt: skip
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    callback = SegmentProgressCallback(window_size=10)
+    model.learn(400, callback=callback, log_interval=1)
+    log = logged(tmp_path)
+    for key in (
+        "swirl/reach_rate_seg0",
+        "swirl/reach_rate_seg1",
+        "swirl/final_segment_mean",
+        "swirl/success_rate",
+        "swirl/task_return_mean",
+    ):
+        assert log[key], key
+    # the cloned policy walks the demos' route: it reaches the first corner and succeeds
+    assert float(log["swirl/reach_rate_seg0"][-1]) > 0.5
+    assert float(log["swirl/success_rate"][-1]) > 0.5
+    assert float(log["swirl/task_return_mean"][-1]) == pytest.approx(
+        float(log["swirl/success_rate"][-1])
+    )
+    assert callback.n_episodes >= 10
+
+
+def test_task_eval_scores_true_success_and_saves_best(tmp_path):
+    model = SwirlDQN(
+        "MlpPolicy", point_env(), demonstrations=point_demos(3), bc_epochs=100, seed=0,
+        exploration_initial_eps=0.05, learning_starts=1000,
+    )  # fmt: skip
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    callback = TaskEvalCallback(
+        point_env(),
+        n_eval_episodes=5,
+        eval_freq=100,
+        best_model_save_path=str(tmp_path / "best"),
+        log_path=str(tmp_path / "eval"),
+        verbose=0,
+    )
+    model.learn(300, callback=callback)
+    assert callback.evaluations_timesteps == [100, 200, 300]
+    assert len(callback.evaluations_episodes) == 3
+    assert callback.evaluations_episodes == sorted(callback.evaluations_episodes)
+    assert callback.evaluations_episodes[-1] > 0
+    # BC start, no learning yet: the greedy policy succeeds; the proxy return is not the score
+    assert callback.success_rates[0] == 1.0
+    assert callback.task_returns[0] == 1.0
+    assert all(r < 0 for r in callback.evaluations_results[0])
+    assert (tmp_path / "best" / "best_model.zip").is_file()
+    saved = np.load(tmp_path / "eval" / "evaluations.npz")
+    np.testing.assert_array_equal(saved["episodes"], callback.evaluations_episodes)
+    np.testing.assert_array_equal(saved["success_rate"], callback.success_rates)
+    log = logged(tmp_path)
+    assert log["eval/success_rate"] and log["eval/task_return"]
+
+
+def test_callbacks_work_with_ppo_on_a_swirl_env(tmp_path):
+    model = PPO("MlpPolicy", point_env(), n_steps=64, batch_size=32, n_epochs=1, seed=0)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    evaluation = TaskEvalCallback(
+        point_env(), n_eval_episodes=2, eval_freq=64, best_model_save_path=str(tmp_path), verbose=0
+    )
+    model.learn(128, callback=[SegmentProgressCallback(), evaluation])
+    assert len(evaluation.success_rates) == 2
+    assert (tmp_path / "best_model.zip").is_file()
+    log = logged(tmp_path)
+    assert log["eval/success_rate"] and log["swirl/final_segment_mean"]
+
+
+def test_plain_env_is_scored_on_its_own_reward(tmp_path):
+    """A baseline on the raw env is evaluated the same way (no segment keys)."""
+    env = gym.wrappers.TimeLimit(PointEnv(), 30)
+    model = DQN("MlpPolicy", env, learning_starts=1000, seed=0)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    evaluation = TaskEvalCallback(
+        gym.wrappers.TimeLimit(PointEnv(), 30), n_eval_episodes=3, eval_freq=100, verbose=0
+    )
+    progress = SegmentProgressCallback()
+    model.learn(200, callback=[progress, evaluation], log_interval=1)
+    assert evaluation.success_rates == [0.0, 0.0]
+    assert evaluation.task_returns == [0.0, 0.0]
+    assert progress.n_segments == 0
+    log = logged(tmp_path)
+    assert "swirl/final_segment_mean" not in log
+    assert log["swirl/success_rate"]

@@ -1,0 +1,291 @@
+"""SwirlDQN: BC start, inverse dynamics, replay prefill, save/load, RBF features, learning."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from stable_baselines3 import DQN
+
+import sb3_swirl.envs  # noqa: F401  (registers the envs)
+from sb3_swirl.demos import Demonstration
+from sb3_swirl.dqn import SwirlDQN, find_task, make_swirl_env
+from sb3_swirl.features import RBFFeaturesExtractor
+from swirl_wrappers import QuadraticReward, Region, SwirlWrapper, TaskModel
+
+PARKING = "sb3_swirl/ParallelParking-v0"
+# tiny networks: extra threads only contend for the CPU cores
+
+
+class PointEnv(gym.Env):
+    """A point on a plane moved by +-0.1 in x or y; reach (1, 1). Actions are identifiable."""
+
+    def __init__(self) -> None:
+        self.observation_space = spaces.Box(-0.5, 1.5, shape=(2,), dtype=np.float32)
+        self.action_space = spaces.Discrete(4)
+        self._moves = np.array([[0.1, 0.0], [-0.1, 0.0], [0.0, 0.1], [0.0, -0.1]])
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.pos = self.np_random.uniform(-0.05, 0.05, size=2)
+        return self.pos.astype(np.float32), {"is_success": False}
+
+    def step(self, action):
+        self.pos = np.clip(self.pos + self._moves[int(action)], -0.5, 1.5)
+        success = bool(np.linalg.norm(self.pos - 1.0) < 0.15)
+        return self.pos.astype(np.float32), float(success), success, False, {"is_success": success}
+
+
+def point_task() -> TaskModel:
+    corners = ([1.0, 0.0], [1.0, 1.0])
+    return TaskModel(
+        regions=[Region(mean=c, covariance=np.eye(2) * 0.01, threshold=1.0) for c in corners],
+        rewards=[QuadraticReward(target=c, weight=np.eye(2)) for c in corners],
+    )
+
+
+def point_env(**wrapper_kwargs) -> gym.Env:
+    return SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 60), point_task(), **wrapper_kwargs)
+
+
+def point_demos(n: int, seed: int = 0) -> list[Demonstration]:
+    """A scripted supervisor: right until x ~ 1, then up."""
+    env = gym.wrappers.TimeLimit(PointEnv(), 60)
+    demos = []
+    for k in range(n):
+        obs, _ = env.reset(seed=seed + k)
+        states, actions, done = [obs], [], False
+        while not done:
+            action = 0 if obs[0] < 0.95 else 2
+            obs, _, terminated, truncated, _ = env.step(action)
+            states.append(obs)
+            actions.append(action)
+            done = terminated or truncated
+        demos.append(Demonstration(np.array(states), np.array(actions)))
+    return demos
+
+
+@pytest.fixture(scope="module")
+def parking():
+    from sb3_swirl.fitting import fit_task
+    from sb3_swirl.supervisors import collect_demos
+
+    demos = collect_demos(PARKING, 5, seed=0)
+    return demos, fit_task(demos, random_state=0)
+
+
+def q_values(model, obs: np.ndarray) -> np.ndarray:
+    with th.no_grad():
+        return model.q_net(th.as_tensor(obs, device=model.device)).cpu().numpy()
+
+
+def success_count(model, env: gym.Env, n_episodes: int, seed: int) -> int:
+    successes = 0
+    for k in range(n_episodes):
+        obs, _ = env.reset(seed=seed + k)
+        done, info = False, {}
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, terminated, truncated, info = env.step(int(action))
+            done = terminated or truncated
+        successes += bool(info["is_success"])
+    return successes
+
+
+def test_plain_env_is_rejected_with_a_hint():
+    with pytest.raises(ValueError, match=r"SwirlWrapper\(.*make_swirl_env"):
+        SwirlDQN("MlpPolicy", gym.make(PARKING))
+
+
+def test_task_is_found_in_sub_envs_and_must_match():
+    venv = make_swirl_env(lambda: gym.wrappers.TimeLimit(PointEnv(), 60), point_task(), n_envs=2)
+    assert find_task(venv).to_json() == point_task().to_json()
+    other = TaskModel(
+        regions=[Region(mean=[0.0, 0.0], covariance=np.eye(2), threshold=1.0)],
+        rewards=[QuadraticReward(target=[0.0, 0.0], weight=np.eye(2))],
+    )
+    with pytest.raises(ValueError, match="differs"):
+        SwirlDQN("MlpPolicy", venv, task=other)
+
+
+def test_bad_demo_shape_is_named():
+    demo = Demonstration(np.zeros((5, 3)), np.zeros(4, dtype=int))
+    model = SwirlDQN("MlpPolicy", point_env(), demonstrations=[demo, demo], seed=0)
+    with pytest.raises(ValueError, match="demonstration 0"):
+        model.pretrain()
+
+
+def test_prefill_matches_what_the_wrapper_shows():
+    """Lifted demo transitions in the buffer equal a replay of the demo through the wrapper."""
+    wrapper_kwargs = dict(reward_scale=0.5, region_bonus=2.0, terminate_on_completion=True)
+    demos = point_demos(2)
+    model = SwirlDQN(
+        "MlpPolicy",
+        point_env(**wrapper_kwargs),
+        demonstrations=demos,
+        prefill_replay=True,
+        bc_epochs=1,
+        seed=0,
+    )
+    model.pretrain()
+    buffer = model.replay_buffer
+    env = point_env(**wrapper_kwargs)
+    row = 0
+    for k, demo in enumerate(demos):
+        obs, _ = env.reset(seed=k)
+        for action in demo.actions:
+            next_obs, reward, terminated, truncated, _ = env.step(int(action))
+            np.testing.assert_allclose(buffer.observations[row, 0], obs, atol=1e-6)
+            np.testing.assert_allclose(buffer.next_observations[row, 0], next_obs, atol=1e-6)
+            assert buffer.actions[row, 0, 0] == action
+            assert buffer.rewards[row, 0] == pytest.approx(reward, abs=1e-5)
+            assert buffer.dones[row, 0] == terminated
+            obs, row = next_obs, row + 1
+            if terminated or truncated:
+                break
+    assert buffer.size() == row
+
+
+def test_inverse_dynamics_labels_state_only_demos():
+    demos = point_demos(3)
+    state_only = [Demonstration(d.observations) for d in demos]
+    model = SwirlDQN(
+        "MlpPolicy",
+        point_env(),
+        demonstrations=state_only,
+        inverse_dynamics_steps=1500,
+        bc_epochs=30,
+        seed=0,
+    )
+    labels = model.infer_demo_actions([d.observations for d in state_only])
+    agreement = np.mean(np.concatenate(labels) == np.concatenate([d.actions for d in demos]))
+    assert agreement >= 0.9
+    # the random-action steps were kept for Q-learning
+    assert model.replay_buffer.size() == 1500
+
+
+def test_bc_only_with_state_only_demos_and_no_inference_is_skipped():
+    state_only = [Demonstration(d.observations) for d in point_demos(2)]
+    model = SwirlDQN("MlpPolicy", point_env(), demonstrations=state_only, infer_actions="none")
+    before = q_values(model, np.zeros((1, 5), dtype=np.float32))
+    with pytest.warns(UserWarning, match="skipping BC"):
+        info = model.pretrain()
+    assert info["n_pairs"] == 0
+    np.testing.assert_array_equal(before, q_values(model, np.zeros((1, 5), dtype=np.float32)))
+
+
+def test_bc_agrees_with_parking_demos(parking):
+    demos, task = parking
+    model = SwirlDQN(
+        "MlpPolicy", SwirlWrapper(gym.make(PARKING), task), demonstrations=demos, seed=0
+    )
+    info = model.pretrain()
+    assert info["accuracy"] >= 0.9
+    # the target network starts from the cloned one
+    obs = np.random.default_rng(0).normal(size=(8, model.observation_space.shape[0]))
+    with th.no_grad():
+        x = th.as_tensor(obs, dtype=th.float32)
+        np.testing.assert_array_equal(model.q_net(x).numpy(), model.q_net_target(x).numpy())
+
+
+@pytest.mark.slow
+def test_swirl_dqn_learns_parking_where_dqn_does_not(parking):
+    demos, task = parking
+    kwargs = dict(
+        learning_rate=1e-3,
+        learning_starts=200,
+        exploration_final_eps=0.02,
+        exploration_fraction=0.5,
+        target_update_interval=500,
+        buffer_size=50_000,
+        seed=0,
+    )
+    env = SwirlWrapper(gym.make(PARKING), task, reward_scale=0.01, region_bonus=1.0)
+    swirl = SwirlDQN(
+        "MlpPolicy",
+        env,
+        demonstrations=demos,
+        prefill_replay=True,
+        exploration_initial_eps=0.1,
+        **kwargs,
+    )
+    swirl.learn(30_000)
+    plain = DQN("MlpPolicy", gym.make(PARKING), **kwargs)
+    plain.learn(30_000)
+    assert success_count(swirl, env, 20, seed=100) >= 1
+    assert success_count(plain, gym.make(PARKING), 20, seed=100) == 0
+
+
+def test_save_load_round_trip_and_no_second_bc(tmp_path, monkeypatch):
+    demos = point_demos(2)
+    model = SwirlDQN(
+        "MlpPolicy", point_env(), demonstrations=demos, bc_epochs=20, learning_starts=50, seed=0
+    )
+    model.learn(100)
+    assert model._bc_done
+    model.save(tmp_path / "model.zip")
+    obs = np.stack([point_env().reset(seed=i)[0] for i in range(6)])
+
+    loaded = SwirlDQN.load(tmp_path / "model.zip", env=point_env())
+    assert loaded.task.to_json() == model.task.to_json()
+    assert loaded._bc_done
+    np.testing.assert_array_equal(q_values(loaded, obs), q_values(model, obs))
+    np.testing.assert_array_equal(
+        loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0]
+    )
+    # also without an env (prediction only): the task comes from the file
+    assert SwirlDQN.load(tmp_path / "model.zip").task.to_json() == model.task.to_json()
+
+    loaded.demonstrations = demos
+
+    def fail():
+        raise AssertionError("pretrain ran again after load")
+
+    monkeypatch.setattr(loaded, "pretrain", fail)
+    loaded.learn(10)
+
+
+def test_rbf_features_shape_range_and_gradient():
+    space = spaces.Box(low=np.array([0, -1, 0, 0, 0]), high=np.array([1, 1, 1, 1, 1]))
+    fe = RBFFeaturesExtractor(space, n_centers_per_dim=4, sigma=0.1, n_indices=3)
+    assert fe.features_dim == 16 * 3
+    obs = th.tensor([[0.3, 0.2, 0.0, 1.0, 0.0], [5.0, -7.0, 1.0, 0.0, 0.0]], requires_grad=True)
+    out = fe(obs)
+    assert out.shape == (2, 48)
+    assert th.all(out >= 0) and th.all(out <= 1)
+    # a partition of unity inside the active segment's block, zeros in the others
+    blocks = out.reshape(2, 16, 3)
+    np.testing.assert_allclose(
+        blocks.sum(dim=1).detach().numpy(), [[0, 1, 0], [1, 0, 0]], atol=1e-6
+    )
+    (out * th.arange(48.0)).sum().backward()
+    assert obs.grad is not None and th.any(obs.grad[:, :2] != 0)
+
+
+def test_rbf_features_need_a_finite_box():
+    space = spaces.Box(-np.inf, np.inf, shape=(3,))
+    with pytest.raises(ValueError, match=r"low=\.\.\. and high="):
+        RBFFeaturesExtractor(space, n_centers_per_dim=3, sigma=0.1)
+    assert RBFFeaturesExtractor(space, 3, 0.1, low=[0, 0, 0], high=[1, 1, 1]).features_dim == 27
+
+
+def test_rbf_q_function_inside_swirl_dqn():
+    model = SwirlDQN(
+        "MlpPolicy",
+        point_env(),
+        demonstrations=point_demos(3),
+        policy_kwargs=dict(
+            features_extractor_class=RBFFeaturesExtractor,
+            features_extractor_kwargs=dict(n_centers_per_dim=9, sigma=0.1),
+            net_arch=[],
+        ),
+        bc_epochs=100,
+        bc_lr=0.05,
+        seed=0,
+    )
+    # n_indices filled from the task: one linear Q per segment
+    assert model.q_net.features_extractor.n_indices == 3
+    assert model.q_net.features_dim == 81 * 3
+    assert model.pretrain()["accuracy"] >= 0.9
