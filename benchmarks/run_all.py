@@ -1,0 +1,36 @@
+"""Run every benchmark in this folder, one after the other (``make bench``).
+
+Each benchmark prints ratios measured side by side in one run. ``--quick`` runs each in its
+smoke mode; the long sample-efficiency study runs only with ``--with-slow``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).parent
+FAST = ["bench_wrappers.py", "bench_envs.py", "bench_fit.py"]
+SLOW = ["sample_efficiency.py"]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true", help="smoke mode of each benchmark")
+    parser.add_argument("--with-slow", action="store_true", help="also the sample-efficiency study")
+    args = parser.parse_args()
+    failed = []
+    for name in FAST + (SLOW if args.with_slow else []):
+        print(f"\n===== {name} =====", flush=True)
+        cmd = [sys.executable, str(HERE / name)] + (["--quick"] if args.quick else [])
+        if subprocess.run(cmd, check=False).returncode != 0:
+            failed.append(name)
+    if failed:
+        print(f"\nfailed: {', '.join(failed)}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

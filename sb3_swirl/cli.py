@@ -1,0 +1,173 @@
+"""The ``sb3-swirl`` command line: generate demos, fit a proxy task, inspect it, run the main job."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+console = Console(stderr=True)
+
+
+def _cmd_demos(args: argparse.Namespace) -> int:
+    from sb3_swirl.demos import save_demos
+    from sb3_swirl.supervisors import collect_demos
+
+    demos = collect_demos(args.env_id, args.n, seed=args.seed, progress=not args.quiet)
+    save_demos(demos, args.output)
+    lengths = [len(d) for d in demos]
+    console.print(
+        f"wrote {len(demos)} demos of {args.env_id} to {args.output} "
+        f"(lengths {min(lengths)}–{max(lengths)} steps)"
+    )
+    return 0
+
+
+def _cmd_fit(args: argparse.Namespace) -> int:
+    from sb3_swirl.demos import load_demos
+    from sb3_swirl.fitting import fit_task
+
+    demos = load_demos(args.demos)
+    segmentation = {"indicator": args.indicator}
+    if args.window is not None:
+        segmentation["window"] = args.window
+    if args.min_demo_fraction is not None:
+        segmentation["min_demo_fraction"] = args.min_demo_fraction
+    reward = {"metric": args.metric}
+    dims = None if args.dims is None else [int(d) for d in args.dims.split(",")]
+    with console.status(f"fitting SWIRL on {len(demos)} demos...") as status:
+        task = fit_task(
+            demos,
+            dims=dims,
+            segmentation=segmentation,
+            reward=reward,
+            random_state=args.seed,
+            progress=lambda msg: status.update(msg),
+        )
+    task.to_json(args.output)
+    console.print(f"wrote a task with {task.n_segments} segments to {args.output}")
+    _print_task(task)
+    return 0
+
+
+def _print_task(task) -> None:
+    table = Table(title=f"SWIRL proxy task: {task.n_segments} segments")
+    table.add_column("segment")
+    table.add_column("region centre")
+    table.add_column("threshold (χ²)")
+    table.add_column("time window")
+    table.add_column("reward target")
+    table.add_column("diag(Ψ)")
+    fmt = lambda values: "[" + ", ".join(f"{v:.3g}" for v in values) + "]"  # noqa: E731
+    for i, (region, reward) in enumerate(zip(task.regions, task.rewards, strict=True)):
+        bounds = (
+            "any"
+            if region.time_bounds is None
+            else f"{region.time_bounds[0]:.0f}–{region.time_bounds[1]:.0f}"
+        )
+        table.add_row(
+            str(i),
+            fmt(region.mean),
+            f"{region.threshold:.3g}",
+            bounds,
+            fmt(reward.target),
+            fmt(reward.weight.diagonal()),
+        )
+    Console().print(table)
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from swirl_wrappers import TaskModel
+
+    task = TaskModel.from_json(args.task)
+    _print_task(task)
+    if args.plot is not None:
+        from sb3_swirl.plotting import plot_rewards, plot_segments
+
+        out = Path(args.plot)
+        out.mkdir(parents=True, exist_ok=True)
+        plot_rewards(task, path=out / "rewards.png")
+        written = [out / "rewards.png"]
+        if args.demos is not None:
+            from sb3_swirl.demos import load_demos
+
+            plot_segments(load_demos(args.demos), task, path=out / "segments.png")
+            written.append(out / "segments.png")
+        console.print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from sb3_swirl.experiments import run_demo
+
+    run_demo(
+        args.task,
+        seed=args.seed,
+        n_demos=args.n_demos,
+        total_timesteps=args.timesteps,
+        out_dir=args.out,
+        progress=not args.quiet,
+    )
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="sb3-swirl",
+        description="SWIRL for Stable-Baselines3: demos -> segments -> rewards -> RL.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("demos", help="generate supervisor demonstrations of a shipped env")
+    p.add_argument("env_id", help="e.g. sb3_swirl/ParallelParking-v0")
+    p.add_argument("-n", type=int, default=5, help="number of demos (default 5)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("-o", "--output", required=True, help="output .npz file")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_demos)
+
+    p = sub.add_parser("fit", help="fit a SWIRL proxy task to demonstrations")
+    p.add_argument("demos", help=".npz file of demonstrations (see `sb3-swirl demos`)")
+    p.add_argument("-o", "--output", required=True, help="output task JSON")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--indicator", default="gmm", choices=["gmm", "velocity", "linear"])
+    p.add_argument("--window", type=int, default=None, help="window length of the indicator")
+    p.add_argument("--min-demo-fraction", type=float, default=None)
+    p.add_argument("--metric", default="mahalanobis", choices=["mahalanobis", "euclidean"])
+    p.add_argument("--dims", default=None, help="comma-separated observation dims to use")
+    p.set_defaults(func=_cmd_fit)
+
+    p = sub.add_parser("show", help="print a fitted task; optionally plot it")
+    p.add_argument("task", help="task JSON written by `sb3-swirl fit`")
+    p.add_argument(
+        "--plot", metavar="DIR", default=None, help="write rewards.png (and segments.png)"
+    )
+    p.add_argument("--demos", default=None, help="demos .npz to draw in segments.png")
+    p.set_defaults(func=_cmd_show)
+
+    p = sub.add_parser("demo", help="the main job: SWIRL vs DQN on a shipped task")
+    p.add_argument("task", choices=["parking", "acrobot"])
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-demos", type=int, default=None)
+    p.add_argument("--timesteps", type=int, default=None, help="training steps per method")
+    p.add_argument("--out", default="results", help="output folder (default results/)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``sb3-swirl`` command."""
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (ValueError, FileNotFoundError) as exc:
+        console.print(f"[bold red]error:[/] {exc}")
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
