@@ -1,4 +1,4 @@
-"""The ``sb3-swirl`` command line: generate demos, fit a proxy task, inspect it, run the main job."""
+"""The ``sb3-swirl`` command line: make demos, fit a proxy task, inspect it, run the main job."""
 
 from __future__ import annotations
 
