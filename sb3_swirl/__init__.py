@@ -1,6 +1,57 @@
-"""sb3-swirl: SWIRL (Sequential Windowed Inverse Reinforcement Learning) for Stable-Baselines3."""
+"""sb3-swirl: SWIRL (Sequential Windowed Inverse Reinforcement Learning) for Stable-Baselines3.
 
-from sb3_swirl.demos import Demonstration
+Data flows one way: demonstrations -> :class:`TransitionStateClustering` (regions) ->
+:class:`QuadraticRewardLearner` (local rewards) -> :class:`~swirl_wrappers.TaskModel` ->
+:class:`~swirl_wrappers.SwirlWrapper` -> :class:`SwirlDQN` (or any SB3 algorithm).
 
-__all__ = ["Demonstration"]
+Importing the package registers the ``sb3_swirl/`` gymnasium environments.
+"""
+
+from sb3_swirl import envs  # noqa: F401  (registers the sb3_swirl/ gymnasium envs)
+from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
+from sb3_swirl.demos import (
+    Demonstration,
+    as_demonstrations,
+    load_demos,
+    save_demos,
+    to_imitation,
+    to_minari,
+)
+from sb3_swirl.dqn import SwirlDQN, make_swirl_env
+from sb3_swirl.envs import NoisyAcrobotEnv, ParallelParkingEnv
+from sb3_swirl.features import RBFFeaturesExtractor
+from sb3_swirl.fitting import fit_task
+from sb3_swirl.plotting import plot_rewards, plot_segments
+from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
+from sb3_swirl.segmentation import TransitionStateClustering
+from sb3_swirl.supervisors import collect_demos
+from sb3_swirl.vec_env import SwirlVecEnv
+from swirl_wrappers import SwirlVectorWrapper, SwirlWrapper, TaskModel
+
+__all__ = [
+    "Demonstration",
+    "NoisyAcrobotEnv",
+    "ParallelParkingEnv",
+    "QuadraticRewardLearner",
+    "RBFFeaturesExtractor",
+    "RewardLearner",
+    "SegmentProgressCallback",
+    "SwirlDQN",
+    "SwirlVecEnv",
+    "SwirlVectorWrapper",
+    "SwirlWrapper",
+    "TaskEvalCallback",
+    "TaskModel",
+    "TransitionStateClustering",
+    "as_demonstrations",
+    "collect_demos",
+    "fit_task",
+    "load_demos",
+    "make_swirl_env",
+    "plot_rewards",
+    "plot_segments",
+    "save_demos",
+    "to_imitation",
+    "to_minari",
+]
 __version__ = "0.1.0"
