@@ -13,6 +13,7 @@ from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
 from sb3_swirl.segmentation import TransitionStateClustering
 from swirl_wrappers import TaskModel
+from swirl_wrappers.task import angle_features
 
 Progress = Callable[[str], None]
 
@@ -53,6 +54,7 @@ def fit_task(
     demos: Any,
     *,
     dims: Any = None,
+    angles: Any = None,
     segmentation: TransitionStateClustering | dict[str, Any] | None = None,
     reward: RewardLearner | dict[str, Any] | None = None,
     random_state: int | None = None,
@@ -69,6 +71,14 @@ def fit_task(
     dims : sequence of int, optional
         Observation dimensions that form the state (e.g. ``(0, 1, 2)`` for x, y, theta);
         ``None`` uses all of them. Recorded in the task so the runtime selects them too.
+        With ``angles``, the observation entries passed through besides the angle features
+        (required; may be empty).
+    angles : sequence of sequences of int, optional
+        Observation entries holding wrapped angles: entry ``j`` defines ``phi_j``, the sum of
+        the listed entries, and the state gets ``(cos phi_j, sin phi_j)`` in front of
+        ``obs[dims]`` (see :class:`swirl_wrappers.TaskModel`). Regions and rewards are then
+        continuous across ``±pi``. For the acrobot, ``angles=[[0], [0, 1]], dims=[2, 3]``
+        gives the absolute link angles, in which the tip height is linear.
     segmentation : TransitionStateClustering or dict, optional
         The segmenter (cloned before fitting) or its keyword arguments.
     reward : RewardLearner or dict, optional
@@ -131,12 +141,39 @@ def fit_task(
     report("validating demonstrations")
     demos = as_demonstrations(demos)
     state_dim = demos[0].observations.shape[1]
+    if angles is not None and dims is None:
+        raise ValueError(
+            "dims must be given with angles: the observation entries passed through besides "
+            "the angle features (use () for none)"
+        )
     if dims is not None:
         dims = tuple(int(d) for d in np.atleast_1d(dims))
-        if not dims or min(dims) < 0 or max(dims) >= state_dim:
+        if (
+            (not dims and angles is None)
+            or min(dims, default=0) < 0
+            or max(dims, default=0) >= state_dim
+        ):
             raise ValueError(
                 f"dims must be indices into the {state_dim} observation dimensions, got {dims}"
             )
+    if angles is not None:
+        try:
+            angles = tuple(tuple(int(i) for i in angle) for angle in angles)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"angles must be a sequence of sequences of ints, got {angles!r}"
+            ) from exc
+        demos = [
+            Demonstration(
+                np.concatenate(
+                    [angle_features(d.observations, angles), d.observations[:, dims]], axis=1
+                ),
+                d.actions,
+                d.rewards,
+            )
+            for d in demos
+        ]
+    elif dims is not None:
         demos = [Demonstration(d.observations[:, dims], d.actions, d.rewards) for d in demos]
 
     report(f"learning transition regions from {len(demos)} demonstrations")
@@ -150,6 +187,7 @@ def fit_task(
         "demo_lengths": {"min": min(lengths), "max": max(lengths), "mean": float(np.mean(lengths))},
         "state_dim": state_dim,
         "dims": None if dims is None else list(dims),
+        "angles": None if angles is None else [list(a) for a in angles],
         "random_state": _jsonable(random_state),
         "segmentation": _record(segmenter),
         "reward": _record(learner),
@@ -160,6 +198,7 @@ def fit_task(
         dims=dims,
         features=segmenter.feature_map_,
         metadata=metadata,
+        angles=angles,
     )
     report(f"done: {task.n_segments} segments")
     return task

@@ -40,7 +40,9 @@ def _axis_names(task: TaskModel) -> list[str]:
     if task.features is not None:
         return [f"feature {j}" for j in range(task.task_dim)]
     if task.dims is not None:
-        return [f"obs[{d}]" for d in task.dims]
+        sums = ["+".join(f"obs[{i}]" for i in angle) for angle in task.angles or ()]
+        trig = [f"{f}({phi})" for phi in sums for f in ("cos", "sin")]
+        return trig + [f"obs[{d}]" for d in task.dims]
     return [f"obs[{j}]" for j in range(task.task_dim)]
 
 

@@ -420,7 +420,15 @@ class TransitionStateClustering(BaseEstimator):
        place and is dropped (without time windows the later one could never be told apart).
        Finally thresholds are shrunk until every pair of regions is separated by a hyperplane
        (a sufficient condition for disjoint ellipsoids; see ``_make_disjoint``).
-    6. ``segments_`` runs the resulting Markov segmentation function along every demonstration.
+    6. Step 4 again, for the Markov segmentation function: transition regions are removed
+       greedily until ``ceil(min_demo_fraction * n_demos)`` demonstrations reach every region
+       in order, the first one after their start state (a demonstration may pass through a
+       region before the previous one, e.g. a place on a growing oscillation, or start inside
+       it). ``segments_`` runs the resulting segmentation along every demonstration.
+
+    States holding wrapped angles need continuous features first (a region straddling
+    ``±pi`` is meaningless): :func:`sb3_swirl.fitting.fit_task` maps them to ``(cos, sin)`` with
+    its ``angles`` argument.
 
     Parameters
     ----------
@@ -631,6 +639,7 @@ class TransitionStateClustering(BaseEstimator):
         for i, region in enumerate(regions):
             if not any(_overlaps(region, regions[j]) for j in kept):
                 kept.append(i)
+        kept = self._prune_unreached(x, [regions[i] for i in kept], kept)
         if not kept:
             raise ValueError(
                 f"no transition region is shared by at least "
@@ -642,6 +651,41 @@ class TransitionStateClustering(BaseEstimator):
         self.region_transitions_ = [members[i] for i in kept]
         self.segments_ = [segment_boundaries(s, self.regions_) for s in x]
         return self
+
+    def _prune_unreached(
+        self, x: list[np.ndarray], regions: list[Region], ids: list[int]
+    ) -> list[int]:
+        """Drop regions until enough demonstrations reach every region in order.
+
+        Algorithm 1 prunes clusters without a transition from every demonstration, but the
+        agent is segmented by the Markov function (first entry into the *next* region), so a
+        cluster can hold every demonstration and still be skipped by some: they pass through
+        it before reaching the previous region (on a growing oscillation every place near the
+        start is revisited later). Likewise a first region that holds a demonstration's start
+        state marks no transition (the start state never counts as one). A demonstration is
+        *complete* when it reaches every region in order, the first after its start. Greedily,
+        the transition region whose removal makes the most demonstrations complete (after
+        shrinking for disjointness) is removed until ``ceil(min_demo_fraction * n_demos)``
+        are; the goal region is kept.
+        """
+        need = self._min_demos(len(x))
+        removable = len(regions) - (1 if self.include_goal else 0)
+
+        def n_complete(subset: list[int]) -> int:
+            if not subset:
+                return 0
+            shrunk = _make_disjoint([regions[j] for j in subset])
+            bounds = [segment_boundaries(s, shrunk) for s in x]
+            return sum(int(b[0] > 0 and b[-1] >= 0) for b in bounds)
+
+        alive = list(range(len(regions)))
+        while n_complete(alive) < need and removable > 0:
+            candidates = [j for j in alive if j < removable]
+            if not candidates:
+                break
+            scores = [n_complete([j for j in alive if j != c]) for c in candidates]
+            alive.remove(candidates[int(np.argmax(scores))])
+        return [ids[j] for j in alive]
 
     def transform_states(self, states: np.ndarray) -> np.ndarray:
         """Map states (the same columns as given to ``fit``) into the regions' task space."""

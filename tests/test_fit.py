@@ -167,3 +167,45 @@ def test_fuzz_fit_task_returns_a_valid_task_or_a_clear_value_error(case):
         index = task.segment_indices(x)
         assert np.all(np.diff(index) >= 0)
         assert np.all(np.isfinite(task.reward(x, index)))
+
+
+def _wrap(angle):
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+@pytest.fixture(scope="module")
+def angular_demos(demos):
+    # Column 0 becomes an angle whose path crosses pi; column 1 passes through. Returns the
+    # demos with the angle unwrapped and wrapped to [-pi, pi).
+    unwrapped = [
+        np.column_stack([np.pi - 0.5 + 0.15 * d.observations[:, 0], d.observations[:, 1]])
+        for d in demos
+    ]
+    return unwrapped, [np.column_stack([_wrap(x[:, 0]), x[:, 1]]) for x in unwrapped]
+
+
+def test_angles_make_the_task_continuous_across_the_wrap(angular_demos):
+    unwrapped, wrapped = angular_demos
+    assert any(np.abs(np.diff(x[:, 0])).max() > np.pi for x in wrapped)  # demos do wrap
+    task = fit_task(wrapped, angles=[[0]], dims=[1], random_state=0)
+    assert task.angles == ((0,),) and task.dims == (1,) and task.task_dim == 3
+    assert task.metadata["angles"] == [[0]]
+    assert task.n_segments >= 2
+    for x in wrapped:
+        index = task.segment_indices(x)
+        assert index[-1] == task.n_segments and index[0] == 0
+    # The wrap is invisible: the same task as from the unwrapped angles.
+    _same_task(fit_task(unwrapped, angles=[[0]], dims=[1], random_state=0), task, rtol=1e-9)
+    loaded = TaskModel.from_json(task.to_json())
+    for x, y in zip(wrapped, unwrapped, strict=True):
+        np.testing.assert_array_equal(loaded.segment_indices(x), task.segment_indices(y))
+
+
+def test_bad_angles_are_clear_value_errors(angular_demos):
+    angular_demos = angular_demos[1]
+    with pytest.raises(ValueError, match="dims must be given with angles"):
+        fit_task(angular_demos, angles=[[0]])
+    with pytest.raises(ValueError, match="angles use index 2"):
+        fit_task(angular_demos, angles=[[2]], dims=[1])
+    with pytest.raises(ValueError, match="angles must be a sequence"):
+        fit_task(angular_demos, angles=[["x"]], dims=[1])

@@ -213,3 +213,47 @@ def test_kernel_features_reproduce_nystroem_pca(three_phases):
     np.testing.assert_allclose(
         tsc.transform_states(demos[0].observations), fmap(demos[0].observations)
     )
+
+
+def _through(waypoints, steps, rng, noise=0.05, dwell=0):
+    """Straight legs through ``waypoints`` (``steps`` each), resting ``dwell`` steps first."""
+    pts = np.asarray(waypoints, dtype=float)
+    legs = [np.linspace(pts[k], pts[k + 1], steps, endpoint=False) for k in range(len(pts) - 1)]
+    x = np.vstack([np.repeat(pts[:1], dwell, axis=0), *legs, pts[-1:]])
+    return x + rng.normal(scale=noise, size=x.shape)
+
+
+def test_regions_some_demos_pass_out_of_order_are_pruned():
+    # Five demos go start -> A -> B -> goal; the sixth visits B first and never returns to B
+    # after A. Both clusters hold a transition from every demo (Algorithm 1 keeps them), yet
+    # under the Markov segmentation the sixth demo would never reach B after A.
+    rng = np.random.default_rng(0)
+    a, b, start, goal = (10.0, 0.0), (10.0, 10.0), (0.0, 0.0), (0.0, 10.0)
+    demos = [_through([start, a, b, goal], 10, rng) for _ in range(5)]
+    demos.append(_through([start, b, a, goal], 10, rng))
+    marks = [np.array([10, 20])] * 6  # the two waypoints of every demo
+
+    tsc = TransitionStateClustering(indicator=lambda s, r: marks, random_state=0).fit(demos)
+    assert len(tsc.regions_) == 2  # one of A, B and the goal
+    assert any(np.linalg.norm(tsc.regions_[0].mean - w) < 1 for w in (a, b))
+    assert all((segs >= 0).all() and segs[0] > 0 for segs in tsc.segments_)
+    # Tolerating one incomplete demo keeps both waypoints.
+    loose = TransitionStateClustering(
+        indicator=lambda s, r: marks, min_demo_fraction=0.8, random_state=0
+    ).fit(demos)
+    assert len(loose.regions_) == 3
+    assert sum((segs >= 0).all() for segs in loose.segments_) == 5
+
+
+def test_a_first_region_holding_the_start_state_is_pruned():
+    # Demos rest at the start for a few steps; an indicator that fires while resting makes a
+    # region around the start, which the agent would "reach" at step 0 without doing anything.
+    rng = np.random.default_rng(1)
+    corners = [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 10.0)]
+    demos = [_through(corners, 12, rng, dwell=6) for _ in range(6)]
+    marks = [np.array([3, 18, 30])] * 6  # resting, and the two corners
+    tsc = TransitionStateClustering(indicator=lambda s, r: marks, random_state=0).fit(demos)
+    assert len(tsc.regions_) == 3
+    for region, corner in zip(tsc.regions_, corners[1:], strict=True):
+        np.testing.assert_allclose(region.mean, corner, atol=0.2)
+    assert all(segs[0] > 6 and (segs >= 0).all() for segs in tsc.segments_)

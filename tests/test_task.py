@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from swirl_wrappers import SCHEMA_VERSION, QuadraticReward, RBFFeatures, Region, TaskModel
+from swirl_wrappers.task import angle_features
 
 
 def random_task(
@@ -282,3 +283,130 @@ def test_invalid_task_and_calls():
         task.reward(np.zeros(4), 0.5)
     with pytest.raises(ValueError, match="shape"):
         task.segment_indices(np.zeros(4))
+
+
+# ---------------------------------------------------------------------------- angle features
+def angle_task(seed: int = 0, features: RBFFeatures | None = None) -> TaskModel:
+    """Absolute link angles of a 2-link chain (obs[1], obs[1] + obs[3]) plus obs[0] and obs[4]."""
+    rng = np.random.default_rng(seed)
+    angles, dims = ((1,), (1, 3)), (4, 0)
+    p = 2 * len(angles) + len(dims) if features is None else features.output_dim
+    regions, rewards = [], []
+    for _ in range(3):
+        a = rng.normal(size=(p, p))
+        regions.append(Region(rng.normal(size=p), a @ a.T + 0.5 * np.eye(p), 4.0))
+        rewards.append(QuadraticReward(rng.normal(size=p), a.T @ a))
+    return TaskModel(regions, rewards, dims=dims, features=features, angles=angles)
+
+
+def angle_rbf_task(seed: int = 1) -> TaskModel:
+    rng = np.random.default_rng(seed)
+    features = RBFFeatures(rng.normal(size=(5, 6)), 0.3, rng.normal(size=(5, 3)))
+    return angle_task(seed, features=features)
+
+
+ANGLE_TASKS = {"angles": angle_task, "angles+rbf": angle_rbf_task}
+
+
+def _angle_batch(seed: int, n: int = 300):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-4.0, 4.0, size=(n, 6))
+    return x, rng.integers(0, 30, n), rng.integers(0, 4, n)
+
+
+def test_angle_features_are_the_documented_map():
+    task = angle_task()
+    x = np.random.default_rng(0).uniform(-4, 4, size=(20, 5))
+    a1, a2 = x[:, 1], x[:, 1] + x[:, 3]
+    want = np.column_stack([np.cos(a1), np.sin(a1), np.cos(a2), np.sin(a2), x[:, 4], x[:, 0]])
+    np.testing.assert_allclose(task.featurize(x), want, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(task.featurize(x[3]), want[3], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(angle_features(x, task.angles), want[:, :4], rtol=0, atol=1e-12)
+    rbf = angle_rbf_task()
+    np.testing.assert_allclose(rbf.featurize(x), rbf.features(want), atol=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(ANGLE_TASKS))
+def test_angle_task_batch_single_and_reference_agree(name):
+    task = ANGLE_TASKS[name]()
+    x, t, index = _angle_batch(1)
+    want_r, want_i = reference(task, x, t, index)
+    r, i = task.reward_and_next_batch(x, t, index)
+    np.testing.assert_allclose(r, want_r, rtol=1e-10, atol=1e-10)
+    np.testing.assert_array_equal(i, want_i)
+    for k in range(0, len(x), 37):
+        rk, ik = task.reward_and_next(x[k], t[k], int(index[k]))
+        assert rk == pytest.approx(want_r[k], rel=1e-10, abs=1e-10) and ik == want_i[k]
+
+
+def test_angle_task_is_continuous_across_the_wrap():
+    task = angle_task()
+    x, _, index = _angle_batch(2)
+    shifted = x.copy()
+    shifted[:, 1] += 2 * np.pi
+    shifted[:, 3] -= 4 * np.pi
+    np.testing.assert_allclose(task.reward(shifted, index), task.reward(x, index), atol=1e-9)
+    # Just below +pi and just above -pi are neighbours: nearly equal rewards.
+    below, above = np.zeros(6), np.zeros(6)
+    below[1], above[1] = np.pi - 1e-6, -np.pi + 1e-6
+    assert task.reward(below, 0) == pytest.approx(task.reward(above, 0), abs=1e-4)
+
+
+def test_angle_task_segment_indices_match_stepping():
+    task = angle_task(3)
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-4, 4, size=(200, 6))
+    # Visit every region in order, through a state whose angle features hit its centre.
+    for j, region in enumerate(task.regions):
+        s = x[20 + 50 * j]
+        c1, s1, c2, s2, d4, d0 = region.mean
+        s[1] = np.arctan2(s1, c1)
+        s[3] = np.arctan2(s2, c2) - s[1]
+        s[4], s[0] = d4, d0
+    index = task.segment_indices(x)
+    assert index[-1] == task.n_segments
+    i = 0
+    for k, s in enumerate(x):
+        i = int(task.next_segment(s, k, i))
+        assert i == index[k]
+
+
+@pytest.mark.parametrize("name", sorted(ANGLE_TASKS))
+def test_angle_task_json_round_trip(name):
+    task = ANGLE_TASKS[name]()
+    loaded = TaskModel.from_json(task.to_json())
+    assert loaded.angles == ((1,), (1, 3)) and loaded.to_dict() == task.to_dict()
+    x, t, index = _angle_batch(4)
+    np.testing.assert_array_equal(loaded.reward(x, index), task.reward(x, index))
+    np.testing.assert_array_equal(loaded.next_segment(x, t, index), task.next_segment(x, t, index))
+
+
+def test_task_json_without_angles_still_loads():
+    data = random_task(0).to_dict()
+    assert data.pop("angles") is None  # files written before the field existed lack it
+    loaded = TaskModel.from_json(json.dumps(data))
+    assert loaded.angles is None and loaded.to_dict() == random_task(0).to_dict()
+
+
+def test_invalid_angles():
+    p = 6
+    region, reward = Region(np.zeros(p), np.eye(p), 1.0), QuadraticReward(np.zeros(p), np.eye(p))
+    with pytest.raises(ValueError, match="dims must be given with angles"):
+        TaskModel([region], [reward], angles=[[0], [0, 1]])
+    for bad in ([], [[]], [[0, -1]], [["a"]], 3):
+        with pytest.raises(ValueError, match=r"TaskModel\.angles"):
+            TaskModel([region], [reward], dims=(2, 3), angles=bad)
+    with pytest.raises(ValueError, match="dims and angles give 5 values"):
+        TaskModel([region], [reward], dims=(2,), angles=[[0], [0, 1]])
+    task = TaskModel([region], [reward], dims=(2, 3), angles=[[0], [0, 5]])
+    with pytest.raises(ValueError, match="uses index 5"):
+        task.reward(np.zeros(5), 0)
+    only_angles = TaskModel(
+        [Region(np.zeros(2), np.eye(2), 1.0)],
+        [QuadraticReward(np.zeros(2), np.eye(2))],
+        dims=(),
+        angles=[[0]],
+    )
+    assert only_angles.featurize(np.array([np.pi, 7.0])) == pytest.approx([-1.0, 0.0], abs=1e-12)
+    with pytest.raises(ValueError, match="angles use index 2"):
+        angle_features(np.zeros(2), [[2]])
