@@ -37,11 +37,15 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     if args.min_demo_fraction is not None:
         segmentation["min_demo_fraction"] = args.min_demo_fraction
     reward = {"metric": args.metric}
-    dims = None if args.dims is None else [int(d) for d in args.dims.split(",")]
+    dims = None if args.dims is None else [int(d) for d in args.dims.split(",") if d]
+    angles = None
+    if args.angles is not None:
+        angles = [[int(i) for i in group.split(",")] for group in args.angles.split(";")]
     with console.status(f"fitting SWIRL on {len(demos)} demos...") as status:
         task = fit_task(
             demos,
             dims=dims,
+            angles=angles,
             segmentation=segmentation,
             reward=reward,
             random_state=args.seed,
@@ -54,27 +58,20 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 
 
 def _print_task(task) -> None:
-    table = Table(title=f"SWIRL proxy task: {task.n_segments} segments")
-    table.add_column("segment")
-    table.add_column("region centre")
-    table.add_column("threshold (χ²)")
-    table.add_column("time window")
-    table.add_column("reward target")
-    table.add_column("diag(Ψ)")
-    fmt = lambda values: "[" + ", ".join(f"{v:.3g}" for v in values) + "]"  # noqa: E731
+    table = Table(
+        title=f"SWIRL proxy task: {task.n_segments} segments",
+        caption="segment i leads to region i; its reward is -(x - centre)ᵀ Ψ (x - centre)",
+    )
+    for name in ("segment", "region centre", "χ² threshold", "time window", "diag(Ψ)"):
+        table.add_column(name)
     for i, (region, reward) in enumerate(zip(task.regions, task.rewards, strict=True)):
-        bounds = (
-            "any"
-            if region.time_bounds is None
-            else f"{region.time_bounds[0]:.0f}–{region.time_bounds[1]:.0f}"
-        )
+        bounds = region.time_bounds
         table.add_row(
             str(i),
-            fmt(region.mean),
+            " ".join(f"{v:.3g}" for v in region.mean),
             f"{region.threshold:.3g}",
-            bounds,
-            fmt(reward.target),
-            fmt(reward.weight.diagonal()),
+            "any" if bounds is None else f"{bounds[0]:.0f}–{bounds[1]:.0f}",
+            " ".join(f"{v:.3g}" for v in reward.weight.diagonal()),
         )
     Console().print(table)
 
@@ -137,7 +134,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--window", type=int, default=None, help="window length of the indicator")
     p.add_argument("--min-demo-fraction", type=float, default=None)
     p.add_argument("--metric", default="mahalanobis", choices=["mahalanobis", "euclidean"])
-    p.add_argument("--dims", default=None, help="comma-separated observation dims to use")
+    p.add_argument(
+        "--dims", default=None, help="comma-separated observation dims to use (e.g. 0,1,3)"
+    )
+    p.add_argument(
+        "--angles",
+        default=None,
+        help="angles as sums of observation dims, ';'-separated, used as (cos, sin) "
+        "(acrobot: '0;0,1' for theta1 and theta1+theta2; then --dims selects the rest)",
+    )
     p.set_defaults(func=_cmd_fit)
 
     p = sub.add_parser("show", help="print a fitted task; optionally plot it")
