@@ -5,8 +5,8 @@ dynamics (Appendix A). Ours plans over a small family of human-like manoeuvres i
 random tree, which is fast and always gives the same kind of demonstration — the structure
 that SWIRL should recover (paper Fig. 13: positioning, then orienting before reversing):
 
-1. *forward*: pull forward along the driving lane (keeping to it) and stop beside the front
-   obstacle at ``x_stop``;
+1. *forward*: speed up to cruise speed, drive straight along the driving lane and stop beside
+   the front obstacle at ``x_stop``;
 2. *reverse in*: reverse while steering right, so that the rear swings into the slot;
 3. *reverse out*: reverse while steering left until the car is straight again;
 4. *final*: straighten and stop at the slot centre.
@@ -16,6 +16,11 @@ Each phase is a simple feedback law; the family is parameterised by the stopping
 rollout (:meth:`ParallelParkingEnv.simulate`) of one member from the current state; the
 supervisor keeps the fastest member whose rollout parks the car with clearance, follows it,
 and re-plans from the actual state whenever the noisy car leaves the predicted path.
+
+The laws are written to give clean data for behavioural cloning: the same state always gets
+the same action; no action is one that does nothing (steering a stopped car, which a cloned
+policy would repeat forever); speed comes before steering; and a deadband on the heading
+keeps the wheel from chattering left-right (the only left-after-right is the counter-steer).
 """
 
 from __future__ import annotations
@@ -37,6 +42,9 @@ from sb3_swirl.envs.parking import (
 )
 
 _FORWARD, _REVERSE_IN, _REVERSE_OUT, _FINAL = range(4)
+# Heading errors a driver leaves alone: the car parks within 15 degrees anyway, and small
+# corrections at walking pace (a few degrees per step) would only add ambiguous labels.
+_STRAIGHT_ENOUGH = math.radians(5.0)
 _Params = tuple[float, float]  # (x_stop, lateral target of the reverse S-curve)
 
 
@@ -57,7 +65,7 @@ class ParkingSupervisor:
     clearance : float, default 0.15
         Metres of clearance a plan must keep from obstacles and curb; plans without it are
         used only when no plan has it.
-    cruise_speed : float, default 0.5
+    cruise_speed : float, default 0.3
         Forward speed (m/s) of the positioning phase.
     reverse_speed : float, default 0.2
         Speed (m/s) while reversing into the slot.
@@ -67,6 +75,10 @@ class ParkingSupervisor:
         Candidate lateral targets of the reverse S-curve (default -0.3 to 0.3 m).
     centre_weight : float, default 20.0
         How many steps a plan may spend to park one metre nearer the slot centre.
+    deadband : float, default 0.7
+        Heading errors up to this fraction of one steering step's turn (and up to 5 degrees)
+        get no steering. Above 0.5 a steering step cannot overshoot into the opposite
+        correction, so the wheel does not chatter left-right; in [0.5, 1).
 
     Attributes
     ----------
@@ -95,11 +107,12 @@ class ParkingSupervisor:
         seed: int | None = None,
         *,
         clearance: float = 0.15,
-        cruise_speed: float = 0.5,
+        cruise_speed: float = 0.3,
         reverse_speed: float = 0.2,
         x_stops: Sequence[float] | None = None,
         lateral_targets: Sequence[float] | None = None,
         centre_weight: float = 20.0,
+        deadband: float = 0.7,
     ) -> None:
         env = getattr(env, "unwrapped", env)
         if not isinstance(env, ParallelParkingEnv):
@@ -108,10 +121,13 @@ class ParkingSupervisor:
             )
         if clearance < 0:
             raise ValueError(f"clearance must be >= 0, got {clearance}")
+        if not 0.5 <= deadband < 1.0:
+            raise ValueError(f"deadband must be in [0.5, 1), got {deadband}")
         self.env = env
         self.seed = seed
         self.clearance = float(clearance)
         self.centre_weight = float(centre_weight)
+        self.deadband = float(deadband)
         self._cruise = self._units(cruise_speed, "cruise_speed")
         self._reverse = self._units(reverse_speed, "reverse_speed")
         x_stops = np.arange(2.5, 6.01, 0.25) if x_stops is None else x_stops
@@ -256,18 +272,19 @@ class ParkingSupervisor:
                     and remaining - self._stop_distance(units) < 0.5 * units * self._step_m
                 ):
                     return DECELERATE, phase
-                # Lane keeping: head back towards the lane centre, at most 10 degrees.
-                wanted = max(-0.17, min(0.17, 0.5 * (env.lane_y - y)))
-                steer = self._steer_towards(theta, wanted, units)
-                if steer is not None:
-                    return steer, phase
+                # Speed first, as a driver pulling out does: steering at walking pace (or at a
+                # standstill, where it does nothing) would make the start states ambiguous.
                 nxt = units + 2
                 if (
                     nxt <= self._cruise
                     and nxt * self._step_m + self._stop_distance(nxt) <= remaining
                 ):
                     return ACCELERATE, phase
-                return NOOP, phase
+                # Hold the heading, no lane keeping: one steering step at cruise speed turns
+                # the car by 8 degrees or more, so chasing the lane centre makes it weave (and
+                # the BC success drop), and the plan picks a reverse that suits the offset.
+                steer = self._straighten(theta, units)
+                return (NOOP if steer is None else steer), phase
         if phase == _REVERSE_IN:
             speed = self._speed_towards(units, -self._reverse)
             if speed is not None:
@@ -283,7 +300,7 @@ class ParkingSupervisor:
             speed = self._speed_towards(units, -self._reverse)
             if speed is not None:
                 return speed, phase
-            if theta > 0.5 * self._turn_per_step(units):
+            if theta > self.deadband * self._turn_per_step(units):
                 return STEER_LEFT, phase
             phase = _FINAL
         return self._final(state), phase
@@ -294,12 +311,12 @@ class ParkingSupervisor:
         beta = self._beta
         return y - self._radius * (math.cos(beta) - math.cos(theta + beta))
 
-    def _steer_towards(self, theta: float, wanted: float, units: int) -> int | None:
-        """The steering action that turns the heading towards ``wanted``, if it helps."""
-        if abs(units) <= 1 or abs(theta - wanted) <= 0.5 * self._turn_per_step(units):
+    def _straighten(self, theta: float, units: int) -> int | None:
+        """The steering action that turns the heading towards 0, unless within the deadband."""
+        tolerance = max(self.deadband * self._turn_per_step(units), _STRAIGHT_ENOUGH)
+        if abs(units) <= 1 or abs(theta) <= tolerance:
             return None
-        increase = theta < wanted
-        return STEER_LEFT if increase == (units > 0) else STEER_RIGHT
+        return STEER_LEFT if (theta < 0) == (units > 0) else STEER_RIGHT
 
     def _final(self, state: State) -> int:
         """Straighten and stop at the slot centre (forwards or backwards as needed)."""
@@ -314,7 +331,7 @@ class ParkingSupervisor:
             return toward
         if along > 1 and distance - self._stop_distance(along) < 0.5 * along * self._step_m:
             return away
-        steer = self._steer_towards(theta, 0.0, units)
+        steer = self._straighten(theta, units)
         if steer is not None:
             return steer
         nxt = along + 2
