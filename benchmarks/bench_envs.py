@@ -17,10 +17,10 @@ from __future__ import annotations
 import argparse
 import os
 import time
-from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
+from _timing import side_by_side, stepper
 from gymnasium.envs.classic_control.acrobot import AcrobotEnv
 from gymnasium.envs.classic_control.cartpole import CartPoleEnv
 
@@ -32,33 +32,12 @@ THROUGHPUT_TARGETS = {"parking/CartPole": 0.5, "acrobot/Acrobot": 0.8}
 DEMO_SECONDS_TARGET = 30.0
 
 
-def stepper(env: gym.Env, steps: int, seed: int) -> Callable[[], float]:
-    """A function that takes ``steps`` random steps (resetting at episode ends); returns seconds."""
-    env.reset(seed=seed)
-    actions = np.random.default_rng(seed).integers(env.action_space.n, size=steps).tolist()
-
-    def run() -> float:
-        step, reset = env.step, env.reset
-        start = time.perf_counter()
-        for a in actions:
-            _, _, terminated, truncated, _ = step(a)
-            if terminated or truncated:
-                reset()
-        return time.perf_counter() - start
-
-    return run
-
-
 def steps_per_second(
     ours: gym.Env, theirs: gym.Env, steps: int, repeats: int
 ) -> tuple[float, float]:
     """Median steps/s of both envs, run alternately."""
-    run_ours, run_theirs = stepper(ours, steps, 0), stepper(theirs, steps, 0)
-    ours_t, theirs_t = [], []
-    for _ in range(repeats):
-        ours_t.append(run_ours())
-        theirs_t.append(run_theirs())
-    return steps / float(np.median(ours_t)), steps / float(np.median(theirs_t))
+    ours_t, theirs_t = side_by_side(stepper(ours, steps, 0), stepper(theirs, steps, 0), repeats)
+    return steps / ours_t, steps / theirs_t
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:

@@ -18,12 +18,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 import timeit
-from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
+from _timing import side_by_side, stepper, vector_stepper
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_swirl.vec_env import SwirlVecEnv
@@ -69,58 +68,6 @@ class CheapEnv(gym.Env):
         return self._states[self._t].copy(), 0.0, self._steps >= self.episode_length, False, {}
 
 
-def single_stepper(env: gym.Env, steps: int, seed: int) -> Callable[[], float]:
-    env.reset(seed=seed)
-    actions = np.random.default_rng(seed).integers(env.action_space.n, size=steps).tolist()
-
-    def run() -> float:
-        step, reset = env.step, env.reset
-        start = time.perf_counter()
-        for a in actions:
-            _, _, terminated, truncated, _ = step(a)
-            if terminated or truncated:
-                reset()
-        return time.perf_counter() - start
-
-    return run
-
-
-def sb3_stepper(venv, steps: int, seed: int) -> Callable[[], float]:
-    venv.seed(seed)
-    venv.reset()
-    actions = np.random.default_rng(seed).integers(2, size=(steps, venv.num_envs))
-
-    def run() -> float:
-        start = time.perf_counter()
-        for a in actions:
-            venv.step(a)
-        return time.perf_counter() - start
-
-    return run
-
-
-def gym_vector_stepper(envs, steps: int, seed: int) -> Callable[[], float]:
-    envs.reset(seed=seed)
-    actions = np.random.default_rng(seed).integers(2, size=(steps, envs.num_envs))
-
-    def run() -> float:
-        start = time.perf_counter()
-        for a in actions:
-            envs.step(a)
-        return time.perf_counter() - start
-
-    return run
-
-
-def side_by_side(raw: Callable[[], float], wrapped: Callable[[], float], repeats: int):
-    raw(), wrapped()  # warm caches and lazy imports
-    raw_times, wrapped_times = [], []
-    for _ in range(repeats):
-        raw_times.append(raw())
-        wrapped_times.append(wrapped())
-    return float(np.median(raw_times)), float(np.median(wrapped_times))
-
-
 def main(argv: list[str] | None = None) -> dict[str, float]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="short smoke run")
@@ -139,8 +86,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     # Acrobot observations are (cos t1, sin t1, cos t2, sin t2, w1, w2); the task reads 4 of them.
     task = three_region_task(dims=(0, 1, 2, 3))
     raw, wrapped = side_by_side(
-        single_stepper(gym.make("Acrobot-v1"), steps, seed=0),
-        single_stepper(SwirlWrapper(gym.make("Acrobot-v1"), task), steps, seed=0),
+        stepper(gym.make("Acrobot-v1"), steps, seed=0),
+        stepper(SwirlWrapper(gym.make("Acrobot-v1"), task), steps, seed=0),
         repeats,
     )
     ratio = wrapped / raw
@@ -159,13 +106,13 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     for name, raw_run, wrapped_run in (
         (
             "SwirlVecEnv(DummyVecEnv)",
-            sb3_stepper(DummyVecEnv(make_envs()), vec_steps, seed=0),
-            sb3_stepper(SwirlVecEnv(DummyVecEnv(make_envs()), vec_task), vec_steps, seed=0),
+            vector_stepper(DummyVecEnv(make_envs()), vec_steps, seed=0),
+            vector_stepper(SwirlVecEnv(DummyVecEnv(make_envs()), vec_task), vec_steps, seed=0),
         ),
         (
             "SwirlVectorWrapper(SyncVectorEnv)",
-            gym_vector_stepper(gym.vector.SyncVectorEnv(make_envs()), vec_steps, seed=0),
-            gym_vector_stepper(
+            vector_stepper(gym.vector.SyncVectorEnv(make_envs()), vec_steps, seed=0),
+            vector_stepper(
                 SwirlVectorWrapper(gym.vector.SyncVectorEnv(make_envs()), vec_task),
                 vec_steps,
                 seed=0,
