@@ -158,14 +158,14 @@ def train_and_evaluate(
             strict=True,
         )
     ]
+    best = max(curve, key=lambda p: p["success_rate"], default=None)
     return {
         "algo": algo,
-        "hyperparams": {
-            k: repr(v) if not isinstance(v, int | float | str) else v
-            for k, v in hyperparams.items()
-        },
+        "hyperparams": hyperparams,
         "curve": curve,
         "final_success": curve[-1]["success_rate"] if curve else float("nan"),
+        "best_success": best["success_rate"] if best else float("nan"),
+        "best_success_episodes": best["episodes"] if best else None,
         "rollouts_to_target": rollouts_to_success(curve, preset.target_success),
         "wall_time_s": wall,
     }
@@ -279,6 +279,7 @@ def run_demo(
     table = Table(title=f"{name}: SWIRL vs DQN ({steps} steps each, seed {seed})")
     table.add_column("method")
     table.add_column(f"rollouts to {preset.target_success:.0%} success", justify="right")
+    table.add_column("best success (at rollout)", justify="right")
     table.add_column("final success", justify="right")
     table.add_column("wall time", justify="right")
     for run in runs:
@@ -286,6 +287,7 @@ def run_demo(
         table.add_row(
             run["algo"],
             "not reached" if reached is None else str(reached),
+            f"{run['best_success']:.0%} ({run['best_success_episodes']})",
             f"{run['final_success']:.0%}",
             f"{run['wall_time_s']:.0f} s",
         )
