@@ -136,7 +136,7 @@ def train_and_evaluate(
     callback = TaskEvalCallback(
         eval_env,
         n_eval_episodes=preset.n_eval_episodes,
-        eval_freq=preset.eval_freq,
+        eval_freq=min(preset.eval_freq, total_timesteps),
         deterministic=True,
         verbose=0,
     )

@@ -1,0 +1,92 @@
+"""The ``sb3-swirl`` command line and the main job, run as a user would (tiny budgets)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from sb3_swirl.cli import main
+from sb3_swirl.demos import load_demos
+from sb3_swirl.experiments import PRESETS, load_hyperparams, rollouts_to_success
+from swirl_wrappers import TaskModel
+
+
+def test_demos_fit_show_round_trip(tmp_path, capsys):
+    demos_path, task_path = tmp_path / "demos.npz", tmp_path / "task.json"
+    assert (
+        main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "3", "-o", str(demos_path), "-q"]) == 0
+    )
+    demos = load_demos(demos_path)
+    assert len(demos) == 3 and all(d.actions is not None for d in demos)
+
+    assert main(["fit", str(demos_path), "-o", str(task_path), "--seed", "1"]) == 0
+    task = TaskModel.from_json(task_path)
+    assert task.n_segments >= 2
+    assert f"SWIRL proxy task: {task.n_segments} segments" in capsys.readouterr().out
+
+    figs = tmp_path / "figs"
+    assert main(["show", str(task_path), "--plot", str(figs), "--demos", str(demos_path)]) == 0
+    assert (figs / "rewards.png").stat().st_size > 0
+    assert (figs / "segments.png").stat().st_size > 0
+
+
+def test_fit_with_angles_matches_the_python_api(tmp_path):
+    from sb3_swirl.fitting import fit_task
+
+    demos_path, task_path = tmp_path / "acro.npz", tmp_path / "acro.json"
+    main(["demos", "sb3_swirl/NoisyAcrobot-v0", "-n", "4", "-o", str(demos_path), "-q"])
+    code = main(
+        ["fit", str(demos_path), "-o", str(task_path), "--angles", "0;0,1", "--dims", "2,3"]
+    )
+    assert code == 0
+    from_cli = TaskModel.from_json(task_path)
+    direct = fit_task(load_demos(demos_path), angles=[[0], [0, 1]], dims=[2, 3], random_state=0)
+    assert from_cli.angles == direct.angles and from_cli.dims == direct.dims
+    np.testing.assert_array_equal(from_cli.regions[0].mean, direct.regions[0].mean)
+
+
+def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
+    assert main(["fit", str(tmp_path / "missing.npz"), "-o", str(tmp_path / "t.json")]) == 2
+    assert "missing.npz" in capsys.readouterr().err
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"kind": "swirl_task", "schema_version": 99}')
+    assert main(["show", str(bad)]) == 2
+    assert "schema version" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "2"])  # -o is required
+
+
+def test_every_preset_has_tuned_hyperparameters_for_both_methods():
+    for preset in PRESETS.values():
+        for algo in ("swirl_dqn", "dqn"):
+            params = load_hyperparams(algo, preset.env_id)
+            assert params["policy"] == "MlpPolicy"
+    swirl = load_hyperparams("swirl_dqn", PRESETS["parking"].env_id)
+    dqn = load_hyperparams("dqn", PRESETS["parking"].env_id)
+    assert swirl["policy_kwargs"] == dqn["policy_kwargs"]  # the same network for both
+
+
+def test_rollouts_to_success_is_the_first_evaluation_at_target():
+    curve = [
+        {"episodes": 10, "success_rate": 0.5},
+        {"episodes": 20, "success_rate": 0.95},
+        {"episodes": 30, "success_rate": 1.0},
+    ]
+    assert rollouts_to_success(curve, 0.95) == 20
+    assert rollouts_to_success(curve[:1], 0.95) is None
+
+
+def test_main_job_writes_its_results(tmp_path):
+    code = main(
+        ["demo", "parking", "--n-demos", "2", "--timesteps", "400", "--out", str(tmp_path), "-q"]
+    )
+    assert code == 0
+    out = tmp_path / "parking"
+    results = json.loads((out / "results.json").read_text())
+    assert [run["algo"] for run in results["runs"]] == ["swirl_dqn", "dqn"]
+    for run in results["runs"]:
+        assert run["curve"], "at least one evaluation"
+        assert all(0.0 <= p["success_rate"] <= 1.0 for p in run["curve"])
+    for name in ("learning_curve.png", "segments.png", "task.json"):
+        assert (out / name).stat().st_size > 0
+    assert TaskModel.from_json(out / "task.json").n_segments == results["n_segments"]
