@@ -33,6 +33,9 @@ _WRAP_HINT = (
 )
 
 
+_REWARD_SETTINGS = ("reward_scale", "region_bonus", "reward_mode", "task_reward_weight", "gamma")
+
+
 def swirl_settings(env: VecEnv) -> dict[str, Any]:
     """The proxy task and reward settings of the SWIRL wrapper inside a vectorised env.
 
@@ -42,7 +45,8 @@ def swirl_settings(env: VecEnv) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``task``, ``reward_scale``, ``region_bonus`` and ``terminate_on_completion``.
+        ``task``, ``reward_scale``, ``region_bonus``, ``terminate_on_completion``,
+        ``reward_mode``, ``task_reward_weight`` and ``gamma``.
 
     Raises
     ------
@@ -55,12 +59,11 @@ def swirl_settings(env: VecEnv) -> dict[str, Any]:
             tracker = venv.tracker
             return {
                 "task": venv.task,
-                "reward_scale": tracker.reward_scale,
-                "region_bonus": tracker.region_bonus,
                 "terminate_on_completion": False,
+                **{name: getattr(tracker, name) for name in _REWARD_SETTINGS},
             }
         venv = venv.venv
-    names = ("task", "reward_scale", "region_bonus", "terminate_on_completion")
+    names = ("task", "terminate_on_completion", *_REWARD_SETTINGS)
     try:
         settings = {name: venv.get_attr(name, indices=[0])[0] for name in names}
     except AttributeError:
@@ -172,6 +175,10 @@ class SwirlDQN(DQN):
     * ``bc_td_coef > 0`` adds a 1-step TD loss on the demo transitions during BC (off by
       default: with ``reward_scale=1`` it lowered the BC accuracy from 0.90 to 0.83 on parking).
     * ``prefill_replay=True`` puts the demo transitions in the replay buffer.
+
+    The proxy reward is the wrapper's: with ``SwirlWrapper(..., reward_mode="potential")`` (the
+    tuned parking setting) give the wrapper the same ``gamma`` as SwirlDQN (a warning says when
+    they differ), so the shaping keeps the true task's optimal policies.
 
     Parameters
     ----------
@@ -311,7 +318,15 @@ class SwirlDQN(DQN):
         self.task: TaskModel | None = None
         self.task_json: str | None = None
         if self.env is not None:
-            self.task = find_task(self.env)  # type: ignore[arg-type]
+            settings = swirl_settings(self.env)  # type: ignore[arg-type]
+            if settings["reward_mode"] == "potential" and settings["gamma"] != self.gamma:
+                warnings.warn(
+                    f"the SWIRL wrapper shapes with gamma={settings['gamma']} but SwirlDQN "
+                    f"discounts with gamma={self.gamma}: the potential shaping is "
+                    "policy-invariant only when they are equal",
+                    stacklevel=2,
+                )
+            self.task = settings["task"]
             self.task_json = self.task.to_json()
             if task is not None and task.to_json() != self.task_json:
                 raise ValueError(
@@ -364,7 +379,9 @@ class SwirlDQN(DQN):
         segment index in each lifted observation and each proxy reward (scale, region bonus,
         index before the step) are those the agent sees online. The last transition of a demo
         is terminal (demos end when the task is done); with ``terminate_on_completion`` a demo
-        ends on the step that reaches the last region, as the wrapper's episode would.
+        ends on the step that reaches the last region, as the wrapper's episode would. Demos
+        without rewards are taken to end in success: task reward 1 on their last transition
+        (it matters only with the wrapper's ``task_reward_weight``).
         """
         settings = swirl_settings(self.env)  # type: ignore[arg-type]
         task = self.task
@@ -384,16 +401,33 @@ class SwirlDQN(DQN):
                     f"environment's (unlifted) observations have {state_dim}"
                 )
             tracker = SegmentTracker(
-                task, 1, state_space, settings["reward_scale"], settings["region_bonus"]
+                task,
+                1,
+                state_space,
+                **{name: settings[name] for name in _REWARD_SETTINGS},
             )
+            # The last transition is terminal: the demo's end or, with
+            # terminate_on_completion, the step that reaches the last region.
+            end = len(demo)
+            if settings["terminate_on_completion"]:
+                complete = np.flatnonzero(task.segment_indices(states)[1:] == task.n_segments)
+                end = int(complete[0]) + 1 if len(complete) else end
+            task_rewards = np.zeros(end)
+            if demo.rewards is not None:
+                task_rewards[:] = np.asarray(demo.rewards, dtype=np.float64)[:end]
+            elif end == len(demo):
+                task_rewards[-1] = 1.0
             tracker.reset(states[:1])
             obs, index, reward = [tracker.lift(states[:1])[0]], [tracker.index[0]], []
-            for state in states[1:]:
-                reward.append(tracker.step(state[None])[0])
+            for t, state in enumerate(states[1 : end + 1]):
+                step_reward = tracker.step(
+                    state[None],
+                    task_rewards=task_rewards[t : t + 1],
+                    terminated=np.array([t == end - 1]),
+                )
+                reward.append(step_reward[0])
                 obs.append(tracker.lift(state[None])[0])
                 index.append(tracker.index[0])
-                if settings["terminate_on_completion"] and index[-1] == task.n_segments:
-                    break
             x = np.asarray(obs, dtype=obs_space.dtype)
             done = np.zeros(len(reward), dtype=bool)
             done[-1] = True

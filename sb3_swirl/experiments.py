@@ -44,8 +44,8 @@ PRESETS: dict[str, Preset] = {
         "sb3_swirl/NoisyAcrobot-v0",
         15,
         60_000,
-        3_000,
-        20,
+        10_000,  # evaluation episodes are up to 1000 steps: evaluate less often
+        10,
         0.95,
         fit_kwargs={"angles": [[0], [0, 1]], "dims": [2, 3]},
     ),

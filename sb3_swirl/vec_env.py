@@ -34,7 +34,7 @@ class SwirlVecEnv(VecEnvWrapper):
     venv : VecEnv
         Sub-environments with a 1-D Box or a Dict observation space.
     task : TaskModel
-    reward_scale, region_bonus, state_key
+    reward_scale, region_bonus, state_key, reward_mode, task_reward_weight, gamma
         As in :class:`swirl_wrappers.SwirlWrapper`.
 
     Attributes
@@ -71,6 +71,9 @@ class SwirlVecEnv(VecEnvWrapper):
         region_bonus: float = 0.0,
         terminate_on_completion: bool = False,
         state_key: str | None = None,
+        reward_mode: str = "quadratic",
+        task_reward_weight: float | None = None,
+        gamma: float = 0.99,
     ) -> None:
         if terminate_on_completion:
             raise ValueError(
@@ -78,7 +81,15 @@ class SwirlVecEnv(VecEnvWrapper):
                 "env with SwirlWrapper(..., terminate_on_completion=True) instead"
             )
         tracker = SegmentTracker(
-            task, venv.num_envs, venv.observation_space, reward_scale, region_bonus, state_key
+            task,
+            venv.num_envs,
+            venv.observation_space,
+            reward_scale,
+            region_bonus,
+            state_key,
+            reward_mode=reward_mode,
+            task_reward_weight=task_reward_weight,
+            gamma=gamma,
         )
         super().__init__(venv, observation_space=tracker.observation_space)
         self.task = task
@@ -96,13 +107,17 @@ class SwirlVecEnv(VecEnvWrapper):
     def step_wait(self) -> VecEnvStepReturn:
         obs, task_rewards, dones, infos = self.venv.step_wait()
         tracker = self.tracker
+        # SB3 marks a time-limit end with TimeLimit.truncated; every other done is a termination.
+        terminated = dones & ~np.array([bool(i.get("TimeLimit.truncated")) for i in infos])
         done = np.flatnonzero(dones)
         if done.size:
             # A done row holds the next episode's first observation; the transition ends in
             # infos[i]["terminal_observation"], lifted with the index the episode ended with.
             terminal = [infos[i]["terminal_observation"] for i in done]
             final_states = np.stack([tracker.states(o) for o in terminal])
-            rewards = tracker.step(tracker.states(obs), dones, final_states)
+            rewards = tracker.step(
+                tracker.states(obs), dones, final_states, task_rewards, terminated
+            )
             ended = tracker.ended_index[done]
             if tracker.state_key is None:  # Box: the final states are the whole observations
                 for i, lifted in zip(done, tracker.lift(final_states, ended), strict=True):
@@ -111,7 +126,7 @@ class SwirlVecEnv(VecEnvWrapper):
                 for i, obs_i, index in zip(done, terminal, ended.tolist(), strict=True):
                     infos[i]["terminal_observation"] = tracker.lift(obs_i, index)
         else:
-            rewards = tracker.step(tracker.states(obs))
+            rewards = tracker.step(tracker.states(obs), None, None, task_rewards, terminated)
         for info, index, task_reward, reward in zip(
             infos,
             tracker.ended_index.tolist(),

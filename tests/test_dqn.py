@@ -117,9 +117,17 @@ def test_bad_demo_shape_is_named():
         model.pretrain()
 
 
-def test_prefill_matches_what_the_wrapper_shows():
+@pytest.mark.parametrize(
+    "wrapper_kwargs",
+    [
+        dict(reward_scale=0.5, region_bonus=2.0, terminate_on_completion=True),
+        dict(reward_mode="potential", reward_scale=0.5, task_reward_weight=2.0, gamma=0.9),
+        dict(reward_mode="potential", task_reward_weight=3.0, terminate_on_completion=True),
+    ],
+    ids=["quadratic", "potential", "potential-completion"],
+)
+def test_prefill_matches_what_the_wrapper_shows(wrapper_kwargs):
     """Lifted demo transitions in the buffer equal a replay of the demo through the wrapper."""
-    wrapper_kwargs = dict(reward_scale=0.5, region_bonus=2.0, terminate_on_completion=True)
     demos = point_demos(2)
     model = SwirlDQN(
         "MlpPolicy",
@@ -128,6 +136,7 @@ def test_prefill_matches_what_the_wrapper_shows():
         prefill_replay=True,
         bc_epochs=1,
         seed=0,
+        gamma=wrapper_kwargs.get("gamma", 0.99),
     )
     model.pretrain()
     buffer = model.replay_buffer
@@ -146,6 +155,11 @@ def test_prefill_matches_what_the_wrapper_shows():
             if terminated or truncated:
                 break
     assert buffer.size() == row
+
+
+def test_potential_shaping_with_another_gamma_warns():
+    with pytest.warns(UserWarning, match="policy-invariant only when they are equal"):
+        SwirlDQN("MlpPolicy", point_env(reward_mode="potential", gamma=0.9), gamma=0.99)
 
 
 def test_inverse_dynamics_labels_state_only_demos():

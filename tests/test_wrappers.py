@@ -380,12 +380,14 @@ def _assert_obs_equal(a, b):
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("kwargs", ["quadratic", "potential"])
 @pytest.mark.parametrize("as_dict", [False, True], ids=["box", "dict"])
-def test_swirl_vec_env_matches_independent_wrappers(as_dict):
+def test_swirl_vec_env_matches_independent_wrappers(as_dict, kwargs):
+    kwargs = SWIRL_KWARGS if kwargs == "quadratic" else POTENTIAL_KWARGS
     task = plane_task()
     make = _make_point(as_dict)
-    reference = DummyVecEnv([lambda: SwirlWrapper(make(), task, **SWIRL_KWARGS)] * N_ENVS)
-    vectorised = SwirlVecEnv(DummyVecEnv([make] * N_ENVS), task, **SWIRL_KWARGS)
+    reference = DummyVecEnv([lambda: SwirlWrapper(make(), task, **kwargs)] * N_ENVS)
+    vectorised = SwirlVecEnv(DummyVecEnv([make] * N_ENVS), task, **kwargs)
     reference.seed(7)
     vectorised.seed(7)
     _assert_obs_equal(vectorised.reset(), reference.reset())
@@ -408,16 +410,25 @@ def test_swirl_vec_env_matches_independent_wrappers(as_dict):
     assert n_done >= 10 and segments >= {0, 1, 2}  # resets and region entries were exercised
 
 
+POTENTIAL_KWARGS = {
+    "reward_mode": "potential",
+    "reward_scale": 2.0,
+    "task_reward_weight": 0.5,
+    "gamma": 0.9,
+}
+
+
+@pytest.mark.parametrize("kwargs", [SWIRL_KWARGS, POTENTIAL_KWARGS], ids=["quadratic", "potential"])
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
 @pytest.mark.parametrize("as_dict", [False, True], ids=["box", "dict"])
-def test_swirl_vector_wrapper_matches_independent_wrappers(mode, as_dict):
+def test_swirl_vector_wrapper_matches_independent_wrappers(mode, as_dict, kwargs):
     task = plane_task()
     make = _make_point(as_dict)
     reference = SyncVectorEnv(
-        [lambda: SwirlWrapper(make(), task, **SWIRL_KWARGS)] * N_ENVS, autoreset_mode=mode
+        [lambda: SwirlWrapper(make(), task, **kwargs)] * N_ENVS, autoreset_mode=mode
     )
     vectorised = SwirlVectorWrapper(
-        SyncVectorEnv([make] * N_ENVS, autoreset_mode=mode), task, **SWIRL_KWARGS
+        SyncVectorEnv([make] * N_ENVS, autoreset_mode=mode), task, **kwargs
     )
     assert vectorised.single_observation_space == reference.single_observation_space
     assert vectorised.observation_space == reference.observation_space
@@ -533,3 +544,106 @@ def test_fuzz_wrapper_invariants(case):
             assert terminated
         if terminated or truncated:
             obs, info = env.reset()
+
+
+# ----------------------------------------------------------------------- reward modes
+def _phi(task, x, index):
+    return index + 1.0 / (1.0 - float(task.reward(np.array([x]), index)))
+
+
+def test_task_reward_weight_adds_the_env_reward_in_quadratic_mode():
+    task = line_task()
+    plain = SwirlWrapper(PointEnv(), task, reward_scale=3.0)
+    mixed = SwirlWrapper(PointEnv(), task, reward_scale=3.0, task_reward_weight=0.25)
+    plain.reset(seed=0)
+    mixed.reset(seed=0)
+    for action in (UP, UP, DOWN, UP, UP):
+        _, r_plain, *_ = plain.step(action)
+        _, r_mixed, _, _, info = mixed.step(action)
+        assert r_mixed == pytest.approx(r_plain + 0.25 * info["task_reward"], abs=1e-12)
+    assert mixed.task_reward_weight == 0.25 and plain.task_reward_weight == 0.0
+
+
+def test_potential_mode_exact_values_and_terminal_potential():
+    task = line_task()
+    # the env terminates when |x| > 2.2: x = 2.5 after the last region
+    env = SwirlWrapper(PointEnv(step_size=0.5, limit=2.2), task, reward_mode="potential", gamma=0.9)
+    assert env.task_reward_weight == 1.0  # the default in potential mode
+    env.reset(seed=0)
+    phi = _phi(task, 0.0, 0)
+    assert env.potential == pytest.approx(phi)
+    # (position after the action, index after, terminated)
+    for x, after, done in [(0.5, 0, False), (1.0, 1, False), (1.5, 1, False), (2.0, 2, False)]:
+        _, reward, terminated, _, info = env.step(UP)
+        new_phi = _phi(task, x, after)
+        assert reward == pytest.approx(x + 0.9 * new_phi - phi, abs=1e-12)
+        assert info["segment"] == after and terminated is done
+        assert after <= new_phi <= after + 1  # segments done plus closeness in (0, 1]
+        phi = new_phi
+    _, reward, terminated, _, _ = env.step(UP)  # x = 2.5: terminates, the potential drops to 0
+    assert terminated and env.potential == 0.0
+    assert reward == pytest.approx(2.5 - phi, abs=1e-12)
+
+
+def test_potential_shaping_telescopes_to_the_task_return():
+    """Shaped discounted return = weight * task return - scale * Phi(s_0), whatever the policy."""
+    task = plane_task()
+    gamma, weight, scale = 0.95, 2.0, 1.5
+    rng = np.random.default_rng(3)
+    for episode in range(6):
+        env = SwirlWrapper(
+            PointEnv(dim=2, step_size=0.25, jitter=0.2, limit=1.0, max_steps=500),
+            task,
+            reward_mode="potential",
+            reward_scale=scale,
+            task_reward_weight=weight,
+            gamma=gamma,
+        )
+        env.reset(seed=episode)
+        phi0, shaped, true, discount, terminated = env.potential, 0.0, 0.0, 1.0, False
+        while not terminated:
+            _, reward, terminated, truncated, info = env.step(int(rng.integers(5)))
+            assert not truncated
+            shaped += discount * reward
+            true += discount * info["task_reward"]
+            discount *= gamma
+        assert shaped == pytest.approx(weight * true - scale * phi0, abs=1e-9)
+
+
+def test_potential_mode_bootstraps_through_truncation():
+    env = SwirlWrapper(PointEnv(max_steps=1), line_task(), reward_mode="potential", gamma=1.0)
+    env.reset(seed=0)
+    phi = env.potential
+    _, reward, terminated, truncated, _ = env.step(UP)
+    assert truncated and not terminated
+    assert env.potential == pytest.approx(_phi(line_task(), 0.5, 0))  # not zeroed
+    assert reward == pytest.approx(0.5 + env.potential - phi)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"reward_mode": "exp"}, "reward_mode"),
+        ({"reward_mode": "potential", "task_reward_weight": 0.0}, "task_reward_weight > 0"),
+        ({"gamma": 1.5}, "gamma"),
+        ({"task_reward_weight": "a lot"}, "task_reward_weight must be a number"),
+    ],
+)
+def test_invalid_reward_options(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        SwirlWrapper(PointEnv(), line_task(), **kwargs)
+    with pytest.raises(ValueError, match=message):
+        SegmentTracker(line_task(), 1, PointEnv().observation_space, **kwargs)
+
+
+def test_tracker_needs_the_env_signals_its_reward_mode_uses():
+    space = PointEnv().observation_space
+    tracker = SegmentTracker(line_task(), 2, space, reward_mode="potential")
+    tracker.reset(np.zeros((2, 1)))
+    with pytest.raises(ValueError, match="terminated"):
+        tracker.step(np.ones((2, 1)), task_rewards=np.zeros(2))
+    with pytest.raises(ValueError, match="task_rewards"):
+        tracker.step(np.ones((2, 1)), terminated=np.zeros(2, dtype=bool))
+    quadratic = SegmentTracker(line_task(), 2, space)
+    quadratic.reset(np.zeros((2, 1)))
+    assert quadratic.step(np.ones((2, 1))).shape == (2,)  # the default mode needs neither

@@ -14,6 +14,23 @@ Timing, the same in every wrapper (and in :meth:`TaskModel.segment_indices`):
   advances and the returned observation carries the new index;
 * after the last region (index ``k``), the reward stays that of segment ``k - 1``.
 
+Reward modes (``reward_mode``), the same in every wrapper:
+
+* ``"quadratic"`` (default; the paper's proxy reward): ``reward_scale * R_i(s')``
+  (+ ``region_bonus`` on a step that reaches region ``i``). ``R_i <= 0``, so when episodes can
+  end early (a crash) a negative per-step reward makes ending them early look good.
+* ``"potential"``: potential-based shaping of the environment's own reward (Ng et al., 1999),
+  ``task_reward_weight * r_env + reward_scale * (gamma * Phi(s', i') - Phi(s, i))``
+  (+ ``region_bonus``) with the SWIRL progress potential ``Phi(s, i) = i + 1 / (1 - R_i(s))``
+  (segments done plus closeness to the next region, in ``(i, i + 1]``) and ``Phi = 0`` after a
+  termination. Over an episode the shaping telescopes, so every policy's shaped return is its
+  discounted task return times ``task_reward_weight`` minus ``reward_scale * Phi(s_0)``: the
+  optimal policies are the true task's (with ``region_bonus = 0`` and ``gamma`` equal to the
+  agent's discount), while the segment rewards give a dense signal towards the next region.
+
+In both modes ``task_reward_weight`` adds the environment's own reward (default 0 for
+``"quadratic"``, 1 for ``"potential"``, where it must be positive: shaping alone has no goal).
+
 ``info`` gets ``"segment"`` (index after the step), ``"task_reward"`` (the environment's own
 reward) and ``"segment_reward"`` (the reward the wrapper returns); the reset ``info`` gets
 ``"segment"``. The environment's own info keys pass through.
@@ -33,11 +50,13 @@ from gymnasium.vector.utils import batch_space
 from swirl_wrappers.task import TaskModel
 
 __all__ = [
+    "REWARD_MODES",
     "SegmentTracker",
     "SwirlVectorWrapper",
     "SwirlWrapper",
     "lift_observation",
     "lift_observation_space",
+    "progress_potential",
 ]
 
 SEGMENT_KEY = "segment"
@@ -126,9 +145,11 @@ def _check_state_space(space: gym.Space, task: TaskModel, name: str) -> None:
         raise ValueError(f"task does not fit the {name} {space}: {exc}") from exc
 
 
-def _check_scalars(reward_scale: float, region_bonus: float) -> tuple[float, float]:
+def _check_scalars(
+    first: float, second: float, names: tuple[str, str] = ("reward_scale", "region_bonus")
+) -> tuple[float, float]:
     values = []
-    for name, value in (("reward_scale", reward_scale), ("region_bonus", region_bonus)):
+    for name, value in zip(names, (first, second), strict=True):
         try:
             value = float(value)
         except (TypeError, ValueError) as exc:
@@ -137,6 +158,42 @@ def _check_scalars(reward_scale: float, region_bonus: float) -> tuple[float, flo
             raise ValueError(f"{name} must be finite, got {value}")
         values.append(value)
     return values[0], values[1]
+
+
+REWARD_MODES = ("quadratic", "potential")
+
+
+def _check_reward_options(
+    reward_mode: str, task_reward_weight: float | None, gamma: float
+) -> tuple[str, float, float]:
+    if reward_mode not in REWARD_MODES:
+        raise ValueError(f"reward_mode must be one of {REWARD_MODES}, got {reward_mode!r}")
+    if task_reward_weight is None:
+        task_reward_weight = 1.0 if reward_mode == "potential" else 0.0
+    weight, gamma = _check_scalars(task_reward_weight, gamma, ("task_reward_weight", "gamma"))
+    if not 0.0 <= gamma <= 1.0:
+        raise ValueError(f"gamma must be in [0, 1], got {gamma}")
+    if reward_mode == "potential" and weight <= 0.0:
+        raise ValueError(
+            "reward_mode='potential' shapes the environment's own reward and needs "
+            f"task_reward_weight > 0 (shaping alone leaves every policy equal), got {weight}"
+        )
+    return reward_mode, weight, gamma
+
+
+def progress_potential(index: np.ndarray | int, segment_reward: np.ndarray | float) -> Any:
+    """The progress potential ``Phi(s, i) = i + 1 / (1 - R_i(s))`` of ``reward_mode="potential"``.
+
+    ``segment_reward`` is ``R_i(s)`` (at most 0) of the segment ``index`` the state is in; the
+    result lies in ``(i, i + 1]`` and grows as the state nears region ``i``.
+
+    Examples
+    --------
+    >>> from swirl_wrappers.wrappers import progress_potential
+    >>> progress_potential(2, 0.0), progress_potential(0, -3.0)
+    (3.0, 0.25)
+    """
+    return index + 1.0 / (1.0 - np.minimum(segment_reward, 0.0))
 
 
 def _one_hot_table(lifted: spaces.Box | spaces.Dict, state_key: str | None, n: int) -> np.ndarray:
@@ -179,12 +236,22 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         End the episode (``terminated=True``) when the last region is reached.
     state_key : str, optional
         For Dict observations, the key holding the task state (default ``"observation"``).
+    reward_mode : {"quadratic", "potential"}
+        ``"quadratic"``: the paper's segment reward; ``"potential"``: potential-based shaping of
+        the environment's reward by segment progress (see the module docstring).
+    task_reward_weight : float, optional
+        Weight of the environment's own reward in the returned reward; default 0 for
+        ``"quadratic"``, 1 for ``"potential"``.
+    gamma : float
+        Discount of the shaping term in ``"potential"`` mode; set it to the agent's ``gamma``.
 
     Attributes
     ----------
     task : TaskModel
     segment : int
         The current segment index, in ``0 .. task.n_segments``.
+    potential : float
+        ``Phi`` of the current lifted state (``"potential"`` mode; 0 after a termination).
 
     Examples
     --------
@@ -219,6 +286,9 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         region_bonus: float = 0.0,
         terminate_on_completion: bool = False,
         state_key: str | None = None,
+        reward_mode: str = "quadratic",
+        task_reward_weight: float | None = None,
+        gamma: float = 0.99,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self,
@@ -227,6 +297,9 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             region_bonus=region_bonus,
             terminate_on_completion=terminate_on_completion,
             state_key=state_key,
+            reward_mode=reward_mode,
+            task_reward_weight=task_reward_weight,
+            gamma=gamma,
         )
         gym.Wrapper.__init__(self, env)
         self.observation_space, self._state_key = lift_observation_space(
@@ -234,9 +307,13 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         )
         self.task = task
         self.reward_scale, self.region_bonus = _check_scalars(reward_scale, region_bonus)
+        self.reward_mode, self.task_reward_weight, self.gamma = _check_reward_options(
+            reward_mode, task_reward_weight, gamma
+        )
         self.terminate_on_completion = bool(terminate_on_completion)
         self._one_hot = _one_hot_table(self.observation_space, self._state_key, task.n_indices)
         self.segment = 0
+        self.potential = 0.0
         self._t = 0
 
     def reset(
@@ -245,7 +322,9 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         obs, info = self.env.reset(seed=seed, options=options)
         state = obs if self._state_key is None else obs[self._state_key]
         self._t = 0
-        _, self.segment = self.task.reward_and_next(state, 0, 0)
+        reward, self.segment = self.task.reward_and_next(state, 0, 0)
+        if self.reward_mode == "potential":
+            self.potential = self._potential(state, reward, 0)
         info[SEGMENT_KEY] = self.segment
         return lift_observation(obs, self._one_hot[self.segment], self._state_key), info
 
@@ -255,16 +334,31 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._t += 1
         before = self.segment
         reward, self.segment = self.task.reward_and_next(state, self._t, before)
-        reward *= self.reward_scale
+        if self.segment != before and self.terminate_on_completion:
+            terminated = terminated or self.segment == self.task.n_segments
+        if self.reward_mode == "potential":
+            # Phi = 0 after a termination keeps the shaping policy-invariant; a truncation
+            # keeps Phi(s'), which the agent bootstraps from.
+            potential = 0.0 if terminated else self._potential(state, reward, before)
+            reward = self.reward_scale * (self.gamma * potential - self.potential)
+            self.potential = potential
+        else:
+            reward *= self.reward_scale
         if self.segment != before:
             reward += self.region_bonus
-            if self.terminate_on_completion and self.segment == self.task.n_segments:
-                terminated = True
+        if self.task_reward_weight != 0.0:
+            reward += self.task_reward_weight * float(task_reward)
         info[SEGMENT_KEY] = self.segment
         info["task_reward"] = task_reward
         info["segment_reward"] = reward
         lifted = lift_observation(obs, self._one_hot[self.segment], self._state_key)
         return lifted, reward, terminated, truncated, info
+
+    def _potential(self, state: np.ndarray, reward: float, before: int) -> float:
+        """``Phi(s, i)`` for the current index, given ``reward = R_before(s)``."""
+        if self.segment != before:
+            reward = self.task.reward_and_next(state, None, self.segment)[0]
+        return float(progress_potential(self.segment, reward))
 
 
 class SegmentTracker:
@@ -281,8 +375,10 @@ class SegmentTracker:
     num_envs : int
     observation_space : gymnasium.spaces.Box or gymnasium.spaces.Dict
         The observation space of *one* sub-environment.
-    reward_scale, region_bonus, state_key
-        As in :class:`SwirlWrapper`.
+    reward_scale, region_bonus, state_key, reward_mode, task_reward_weight, gamma
+        As in :class:`SwirlWrapper`. With ``reward_mode="potential"`` or a nonzero
+        ``task_reward_weight``, :meth:`step` needs the environment's ``task_rewards`` and
+        ``terminated`` flags.
 
     Attributes
     ----------
@@ -294,6 +390,8 @@ class SegmentTracker:
         Current segment index of each sub-environment.
     t : ndarray of int64, shape (num_envs,)
         Steps taken in each sub-environment's current episode.
+    potential : ndarray of float64, shape (num_envs,)
+        ``Phi`` of each sub-environment's current lifted state (``"potential"`` mode).
 
     Examples
     --------
@@ -323,6 +421,10 @@ class SegmentTracker:
         reward_scale: float = 1.0,
         region_bonus: float = 0.0,
         state_key: str | None = None,
+        *,
+        reward_mode: str = "quadratic",
+        task_reward_weight: float | None = None,
+        gamma: float = 0.99,
     ) -> None:
         self.observation_space, self.state_key = lift_observation_space(
             observation_space, task, state_key
@@ -332,9 +434,13 @@ class SegmentTracker:
         self.task = task
         self.num_envs = int(num_envs)
         self.reward_scale, self.region_bonus = _check_scalars(reward_scale, region_bonus)
+        self.reward_mode, self.task_reward_weight, self.gamma = _check_reward_options(
+            reward_mode, task_reward_weight, gamma
+        )
         self.index = np.zeros(self.num_envs, dtype=np.int64)
         self.ended_index = self.index
         self.t = np.zeros(self.num_envs, dtype=np.int64)
+        self.potential = np.zeros(self.num_envs, dtype=np.float64)
         self._one_hot = _one_hot_table(self.observation_space, self.state_key, task.n_indices)
 
     def states(self, obs: Any) -> np.ndarray:
@@ -352,14 +458,19 @@ class SegmentTracker:
         # New arrays, not in-place writes: earlier infos may hold the old ones.
         self.t, self.index = self.t.copy(), self.index.copy()
         self.t[mask] = 0
-        self.index[mask] = self.task.reward_and_next_batch(states[mask], zeros, zeros)[1]
+        reward, self.index[mask] = self.task.reward_and_next_batch(states[mask], zeros, zeros)
         self.ended_index = self.index
+        if self.reward_mode == "potential":
+            self.potential = self.potential.copy()
+            self.potential[mask] = self._potentials(states[mask], reward, zeros, self.index[mask])
 
     def step(
         self,
         states: np.ndarray,
         restart: np.ndarray | None = None,
         final_states: np.ndarray | None = None,
+        task_rewards: np.ndarray | None = None,
+        terminated: np.ndarray | None = None,
     ) -> np.ndarray:
         """Advance every episode to ``states`` and return the float64 segment rewards.
 
@@ -374,17 +485,27 @@ class SegmentTracker:
             environment resets in the step that ends an episode (SB3, gymnasium ``SAME_STEP``):
             the reward of those rows is that of the final transition. Without it (gymnasium
             ``NEXT_STEP``) the ``restart`` rows made no transition and get reward 0.
+        task_rewards : array of shape (num_envs,), optional
+            The environment's own rewards of this step; needed when ``task_reward_weight`` is
+            not 0.
+        terminated : bool array of shape (num_envs,), optional
+            Which transitions ended their episode by a termination (not a truncation); needed
+            by ``reward_mode="potential"``, where a terminal state has potential 0.
 
         After the call :attr:`index` holds the indices of the current episodes and
         ``ended_index`` the index each row's transition ended with (they differ only at
         ``restart`` rows with ``final_states``).
         """
+        if self.reward_mode == "potential" and terminated is None:
+            raise ValueError("reward_mode='potential' needs the terminated flags of each step")
+        if self.task_reward_weight != 0.0 and task_rewards is None:
+            raise ValueError("task_reward_weight != 0 needs the environment's task_rewards")
         before = self.index
         self.t += 1
         if restart is None or not restart.any():
             reward, self.index = self.task.reward_and_next_batch(states, self.t, before)
             self.ended_index = self.index
-            return self._shape(reward, before, self.index)
+            return self._shape(reward, before, self.index, states, task_rewards, terminated)
         rows = np.flatnonzero(restart)
         # Index 0 at t = 0 makes the restart rows compute exactly reset's M(s_0, 0, 0).
         t, index = self.t.copy(), before.copy()
@@ -392,7 +513,9 @@ class SegmentTracker:
         index[rows] = 0
         if final_states is None:
             reward, self.index = self.task.reward_and_next_batch(states, t, index)
-            reward = self._shape(reward, index, self.index)
+            # A restart row made no transition: its potential restarts from Phi(s_0).
+            not_terminal = None if terminated is None else np.where(restart, False, terminated)
+            reward = self._shape(reward, index, self.index, states, task_rewards, not_terminal)
             reward[rows] = 0.0
             self.ended_index, self.t = self.index, t
             return reward
@@ -408,13 +531,47 @@ class SegmentTracker:
         self.ended_index[rows] = nxt[n:]
         step_reward = reward[:n].copy()
         step_reward[rows] = reward[n:]
-        return self._shape(step_reward, before, self.ended_index)
+        ended_states = states.copy()
+        ended_states[rows] = final_states
+        shaped = self._shape(
+            step_reward, before, self.ended_index, ended_states, task_rewards, terminated
+        )
+        if self.reward_mode == "potential":
+            self.potential[rows] = self._potentials(
+                states[rows], reward[rows], index[rows], self.index[rows]
+            )
+        return shaped
 
-    def _shape(self, reward: np.ndarray, before: np.ndarray, after: np.ndarray) -> np.ndarray:
-        if self.reward_scale != 1.0:
+    def _potentials(
+        self, states: np.ndarray, reward: np.ndarray, before: np.ndarray, after: np.ndarray
+    ) -> np.ndarray:
+        """``Phi(s, after)`` given ``reward = R_before(s)``, re-evaluated where the index moved."""
+        moved = after != before
+        if moved.any():
+            reward = reward.copy()
+            reward[moved] = self.task.reward_and_next_batch(states[moved], None, after[moved])[0]
+        return progress_potential(after, reward)
+
+    def _shape(
+        self,
+        reward: np.ndarray,
+        before: np.ndarray,
+        after: np.ndarray,
+        states: np.ndarray,
+        task_rewards: np.ndarray | None,
+        terminated: np.ndarray | None,
+    ) -> np.ndarray:
+        if self.reward_mode == "potential":
+            potential = self._potentials(states, reward, before, after)
+            potential[np.asarray(terminated, dtype=bool)] = 0.0
+            reward = self.reward_scale * (self.gamma * potential - self.potential)
+            self.potential = potential
+        elif self.reward_scale != 1.0:
             reward = reward * self.reward_scale
         if self.region_bonus != 0.0:
             reward = reward + self.region_bonus * (after != before)
+        if self.task_reward_weight != 0.0:
+            reward = reward + self.task_reward_weight * np.asarray(task_rewards, dtype=np.float64)
         return reward
 
     def lift(self, obs: Any, index: np.ndarray | int | None = None) -> Any:
@@ -446,7 +603,7 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
     Parameters
     ----------
     env : gymnasium.vector.VectorEnv
-    task, reward_scale, region_bonus, state_key
+    task, reward_scale, region_bonus, state_key, reward_mode, task_reward_weight, gamma
         As in :class:`SwirlWrapper`.
 
     Examples
@@ -476,6 +633,9 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
         region_bonus: float = 0.0,
         terminate_on_completion: bool = False,
         state_key: str | None = None,
+        reward_mode: str = "quadratic",
+        task_reward_weight: float | None = None,
+        gamma: float = 0.99,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self,
@@ -484,6 +644,9 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
             region_bonus=region_bonus,
             terminate_on_completion=terminate_on_completion,
             state_key=state_key,
+            reward_mode=reward_mode,
+            task_reward_weight=task_reward_weight,
+            gamma=gamma,
         )
         VectorWrapper.__init__(self, env)
         if terminate_on_completion:
@@ -495,7 +658,15 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
             env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
         )
         self.tracker = SegmentTracker(
-            task, self.num_envs, env.single_observation_space, reward_scale, region_bonus, state_key
+            task,
+            self.num_envs,
+            env.single_observation_space,
+            reward_scale,
+            region_bonus,
+            state_key,
+            reward_mode=reward_mode,
+            task_reward_weight=task_reward_weight,
+            gamma=gamma,
         )
         self.single_observation_space = self.tracker.observation_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -522,8 +693,9 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
         obs, task_rewards, terminations, truncations, infos = self.env.step(actions)
         states = self.tracker.states(obs)
         done = np.logical_or(terminations, truncations)
+        env_signals = {"task_rewards": task_rewards, "terminated": terminations}
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            rewards = self.tracker.step(states, restart=self._autoreset)
+            rewards = self.tracker.step(states, restart=self._autoreset, **env_signals)
             self._autoreset = done
         elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             # A done row holds the next episode's first observation; the transition ends in
@@ -531,12 +703,15 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
             final = np.flatnonzero(done)
             final_obs = infos["final_obs"]
             rewards = self.tracker.step(
-                states, done, np.stack([self.tracker.states(final_obs[i]) for i in final])
+                states,
+                done,
+                np.stack([self.tracker.states(final_obs[i]) for i in final]),
+                **env_signals,
             )
             for i in final:
                 final_obs[i] = self.tracker.lift(final_obs[i], self.tracker.ended_index[i])
         else:
-            rewards = self.tracker.step(states)
+            rewards = self.tracker.step(states, **env_signals)
         infos[SEGMENT_KEY] = self.tracker.index.copy()
         infos["task_reward"] = np.asarray(task_rewards).copy()
         infos["segment_reward"] = rewards.copy()

@@ -1,0 +1,308 @@
+"""Sample efficiency of SWIRL against plain DQN (the paper's Fig. 2), and SWIRL's step cost.
+
+For each task and seed, SwirlDQN on the SWIRL proxy task (demos -> ``fit_task`` -> wrapper) and
+plain SB3 DQN on the true sparse task train with the same network and step budget, with the
+tuned hyperparameters of ``zoo_configs/{swirl_dqn,dqn}.yml``, through
+:func:`sb3_swirl.experiments.train_and_evaluate`; both are evaluated on the *true* success
+(``preset.n_eval_episodes`` deterministic episodes every ``preset.eval_freq`` steps).
+
+Measured per seed: the training episodes (rollouts) completed at the first evaluation that
+reaches the target, and the ratio SWIRL / DQN.
+
+* **parking** (5 demos): the target is 95 % true success.
+* **acrobot** (15 demos): the target is 95 % of the best success rate that *either* method
+  reaches on that seed (the paper's "max success"); undefined when neither ever succeeds.
+
+A method that never reaches the target is *censored*: it needed more than the ``N`` episodes it
+ran. The ratio is then a bound: SWIRL reached, DQN not -> ratio < SWIRL / N_DQN (an upper
+bound); DQN reached, SWIRL not -> ratio > N_SWIRL / DQN; neither -> unknown. The median over
+seeds is exact when every ratio is, an upper bound ("<=") when the only censored ratios are
+upper bounds (replacing them by their bounds can only raise the median), and unresolved
+otherwise. Targets on the median: parking <= 0.15 (paper) and <= 0.10 (this project), acrobot
+<= 0.3.
+
+Throughput: env steps per second of SB3 ``DQN.learn`` on parking with the SWIRL wrapper (the
+tuned wrapper arguments, a fitted task) against the raw env, same hyperparameters, runs
+alternating and medians compared. Target: wrapped / raw >= 0.95.
+
+Writes ``results/sample_efficiency/results.json``. Not a test (hours of CPU at full size).
+
+Run: ``.venv/bin/python benchmarks/sample_efficiency.py [--quick] [--seeds 10 11 12 13 14]
+[--tasks parking acrobot] [--jobs 2]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sb3_swirl.experiments import rollouts_to_success
+
+RATIO_TARGETS = {"parking": (0.15, 0.10), "acrobot": (0.3,)}
+THROUGHPUT_TARGET = 0.95
+ALGOS = ("swirl_dqn", "dqn")
+
+
+def _preset(task: str, quick: bool, total_timesteps: int | None) -> tuple[Any, int]:
+    from sb3_swirl.experiments import PRESETS
+
+    preset = PRESETS[task]
+    steps = preset.total_timesteps if total_timesteps is None else total_timesteps
+    if quick:
+        preset = dataclasses.replace(preset, eval_freq=500, n_eval_episodes=3)
+        steps = min(steps, 1_500)
+    return preset, steps
+
+
+def run_one(task: str, algo: str, seed: int, quick: bool, total_timesteps: int | None) -> dict:
+    """Train one method on one seed of one task; returns ``train_and_evaluate``'s record."""
+    import torch
+
+    torch.set_num_threads(1)  # tiny networks: extra threads only contend for the cores
+    import sb3_swirl.envs  # noqa: F401  (registers the envs)
+    from sb3_swirl.experiments import train_and_evaluate
+
+    preset, steps = _preset(task, quick, total_timesteps)
+    fitted = demos = None
+    if algo == "swirl_dqn":
+        from sb3_swirl.fitting import fit_task
+        from sb3_swirl.supervisors import collect_demos
+
+        demos = collect_demos(preset.env_id, preset.n_demos, seed=seed, progress=False)
+        fitted = fit_task(demos, random_state=seed, **preset.fit_kwargs)
+    record = train_and_evaluate(
+        algo,
+        preset,
+        task=fitted,
+        demos=demos,
+        total_timesteps=steps,
+        seed=seed,
+        progress=False,
+    )
+    record.update(task=task, seed=seed, total_timesteps=steps)
+    if fitted is not None:
+        record["n_segments"] = fitted.n_segments
+    return record
+
+
+def compare_seed(task: str, swirl: dict, dqn: dict, target_success: float) -> dict[str, Any]:
+    """Episodes to target of both methods on one seed and their (possibly censored) ratio."""
+    best = max(p["success_rate"] for run in (swirl, dqn) for p in run["curve"])
+    target = target_success if task == "parking" else 0.95 * best
+    out: dict[str, Any] = {"seed": swirl["seed"], "target": target, "best_success": best}
+    if task != "parking" and best <= 0.0:
+        out.update(swirl=None, dqn=None, ratio=None, kind="?")
+        return out
+    for name, run in (("swirl", swirl), ("dqn", dqn)):
+        out[name] = rollouts_to_success(run["curve"], target)
+        out[f"{name}_episodes_run"] = int(run["curve"][-1]["episodes"]) if run["curve"] else 0
+        out[f"{name}_best"] = max((p["success_rate"] for p in run["curve"]), default=0.0)
+    s, d = out["swirl"], out["dqn"]
+    if d == 0:  # DQN succeeded before finishing an episode: no ratio
+        out.update(ratio=None, kind="?")
+    elif s is not None and d is not None:
+        out.update(ratio=s / d, kind="=")
+    elif s is not None:
+        out.update(ratio=s / max(out["dqn_episodes_run"], 1), kind="<")
+    elif d is not None:
+        out.update(ratio=out["swirl_episodes_run"] / max(d, 1), kind=">")
+    else:
+        out.update(ratio=None, kind="?")
+    return out
+
+
+def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Median and spread of the per-seed ratios, with the censoring rule of the module doc."""
+    kinds = [r["kind"] for r in rows]
+    values = [r["ratio"] for r in rows if r["ratio"] is not None]
+    summary: dict[str, Any] = {
+        "n_seeds": len(rows),
+        "swirl_reached": sum(r.get("swirl") is not None for r in rows),
+        "dqn_reached": sum(r.get("dqn") is not None for r in rows),
+        "kinds": kinds,
+    }
+    if not values or any(k in (">", "?") for k in kinds):
+        summary.update(median=None, bound="unresolved")
+    else:
+        summary.update(
+            median=statistics.median(values),
+            bound="=" if all(k == "=" for k in kinds) else "<=",
+            min=min(values),
+            max=max(values),
+            q25=float(np.percentile(values, 25)),
+            q75=float(np.percentile(values, 75)),
+        )
+    return summary
+
+
+def _fmt_episodes(row: dict[str, Any], name: str) -> str:
+    if row.get(name) is not None:
+        return str(row[name])
+    if f"{name}_episodes_run" in row:
+        return f">{row[f'{name}_episodes_run']} (not reached)"
+    return "n/a"
+
+
+def _fmt_ratio(row: dict[str, Any]) -> str:
+    kind, ratio = row["kind"], row["ratio"]
+    if kind == "?":
+        return "undefined (neither reached, or DQN at 0 episodes)"
+    return {"=": f"{ratio:.3f}", "<": f"< {ratio:.3f} (DQN censored)", ">": f"> {ratio:.3f}"}[kind]
+
+
+def print_task(task: str, rows: list[dict[str, Any]], summary: dict[str, Any]) -> None:
+    print(f"\n{task}: training episodes to target (SWIRL vs DQN)")
+    print(f"{'seed':>5}  {'target':>6}  {'SWIRL':>24}  {'DQN':>24}  ratio SWIRL/DQN")
+    for r in rows:
+        print(
+            f"{r['seed']:>5}  {r['target']:>6.3f}  {_fmt_episodes(r, 'swirl'):>24}  "
+            f"{_fmt_episodes(r, 'dqn'):>24}  {_fmt_ratio(r)}"
+        )
+    n = summary["n_seeds"]
+    print(
+        f"SWIRL reached the target on {summary['swirl_reached']}/{n} seeds, DQN on "
+        f"{summary['dqn_reached']}/{n}"
+    )
+    if summary["median"] is None:
+        print("median ratio: unresolved (some seed has a lower bound or no value)")
+        verdicts = ["not shown" for _ in RATIO_TARGETS[task]]
+    else:
+        sign = "=" if summary["bound"] == "=" else "<="
+        print(
+            f"median ratio {sign} {summary['median']:.3f}  (min {summary['min']:.3f}, "
+            f"IQR {summary['q25']:.3f}-{summary['q75']:.3f}, max {summary['max']:.3f})"
+        )
+        verdicts = ["PASS" if summary["median"] <= t else "FAIL" for t in RATIO_TARGETS[task]]
+    for t, verdict in zip(RATIO_TARGETS[task], verdicts, strict=True):
+        print(f"  target median ratio <= {t:.2f}: {verdict}")
+    summary["targets"] = dict(zip([str(t) for t in RATIO_TARGETS[task]], verdicts, strict=True))
+
+
+def throughput(steps: int, repeats: int) -> dict[str, Any]:
+    """Env steps/s of SB3 DQN on parking, with the SWIRL wrapper and without, side by side."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import DQN
+
+    torch.set_num_threads(1)
+    import sb3_swirl.envs  # noqa: F401
+    from sb3_swirl.experiments import (
+        PRESETS,
+        _algo_kwargs,
+        _swirl_wrapper_kwargs,
+        load_hyperparams,
+    )
+    from sb3_swirl.fitting import fit_task
+    from sb3_swirl.supervisors import collect_demos
+    from swirl_wrappers import SwirlWrapper
+
+    preset = PRESETS["parking"]
+    demos = collect_demos(preset.env_id, preset.n_demos, seed=0, progress=False)
+    task = fit_task(demos, random_state=0)
+    wrapper_kwargs = _swirl_wrapper_kwargs(load_hyperparams("swirl_dqn", preset.env_id))
+    kwargs = _algo_kwargs(load_hyperparams("dqn", preset.env_id))
+    kwargs.pop("policy", None)
+
+    def rate(wrapped: bool) -> float:
+        env = gym.make(preset.env_id)
+        if wrapped:
+            env = SwirlWrapper(env, task, **wrapper_kwargs)
+        model = DQN("MlpPolicy", env, seed=0, **kwargs)
+        start = time.perf_counter()
+        model.learn(total_timesteps=steps)
+        return steps / (time.perf_counter() - start)
+
+    rate(False)  # warm-up: torch's first calls are slow
+    rates: dict[str, list[float]] = {"raw": [], "swirl": []}
+    for k in range(repeats):  # alternate, so slow phases of a shared machine hit both alike
+        for wrapped in (False, True) if k % 2 == 0 else (True, False):
+            rates["swirl" if wrapped else "raw"].append(rate(wrapped))
+    raw, swirl = statistics.median(rates["raw"]), statistics.median(rates["swirl"])
+    return {
+        "steps": steps,
+        "repeats": repeats,
+        "wrapper_kwargs": wrapper_kwargs,
+        "raw_steps_per_s": raw,
+        "swirl_steps_per_s": swirl,
+        "ratio": swirl / raw,
+        "all": rates,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="1 seed, 1500 steps: a smoke run")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[10, 11, 12, 13, 14])
+    parser.add_argument(
+        "--tasks", nargs="+", default=["parking", "acrobot"], choices=["parking", "acrobot"]
+    )
+    parser.add_argument("--jobs", type=int, default=2, help="training runs at once (joblib)")
+    parser.add_argument(
+        "--total-timesteps",
+        type=int,
+        default=None,
+        help="override the presets' step budget (the same for both methods)",
+    )
+    parser.add_argument("--no-throughput", action="store_true", help="skip the throughput check")
+    parser.add_argument("--out", default="results/sample_efficiency")
+    args = parser.parse_args(argv)
+    from joblib import Parallel, delayed
+
+    seeds = args.seeds[:1] if args.quick else args.seeds
+    jobs = [(task, algo, seed) for task in args.tasks for seed in seeds for algo in ALGOS]
+    print(
+        f"{len(jobs)} training runs ({', '.join(args.tasks)}; seeds {seeds}), "
+        f"{args.jobs} at a time",
+        flush=True,
+    )
+    start = time.perf_counter()
+    records = Parallel(n_jobs=args.jobs)(
+        delayed(run_one)(task, algo, seed, args.quick, args.total_timesteps)
+        for task, algo, seed in jobs
+    )
+    results: dict[str, Any] = {"seeds": seeds, "quick": args.quick, "tasks": {}}
+    for task in args.tasks:
+        preset, steps = _preset(task, args.quick, args.total_timesteps)
+        by_seed = {(r["algo"], r["seed"]): r for r in records if r["task"] == task}
+        rows = [
+            compare_seed(task, by_seed["swirl_dqn", s], by_seed["dqn", s], preset.target_success)
+            for s in seeds
+        ]
+        summary = summarise(rows)
+        print_task(task, rows, summary)
+        results["tasks"][task] = {
+            "preset": dataclasses.asdict(preset),
+            "total_timesteps": steps,
+            "per_seed": rows,
+            "summary": summary,
+            "runs": [r for r in records if r["task"] == task],
+        }
+    results["training_wall_s"] = time.perf_counter() - start
+    if not args.no_throughput:
+        steps, repeats = (1_000, 2) if args.quick else (5_000, 4)
+        tp = throughput(steps, repeats)
+        results["throughput"] = tp
+        verdict = "PASS" if tp["ratio"] >= THROUGHPUT_TARGET else "FAIL"
+        print(
+            f"\nthroughput, SB3 DQN on parking ({steps} steps x {repeats}, medians): raw "
+            f"{tp['raw_steps_per_s']:.0f} steps/s, with SwirlWrapper "
+            f"{tp['swirl_steps_per_s']:.0f} steps/s, ratio {tp['ratio']:.3f} "
+            f"(target >= {THROUGHPUT_TARGET}): {verdict}"
+        )
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    name = "results_quick.json" if args.quick else "results.json"
+    (out / name).write_text(json.dumps(results, indent=1))
+    print(f"wrote {out / name}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
