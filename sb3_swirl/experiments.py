@@ -287,7 +287,8 @@ def run_demo(
         table.add_row(
             run["algo"],
             "not reached" if reached is None else str(reached),
-            f"{run['best_success']:.0%} ({run['best_success_episodes']})",
+            f"{run['best_success']:.0%}"
+            + (f" ({run['best_success_episodes']})" if run["best_success"] > 0 else ""),
             f"{run['final_success']:.0%}",
             f"{run['wall_time_s']:.0f} s",
         )
