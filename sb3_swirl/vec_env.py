@@ -107,14 +107,20 @@ class SwirlVecEnv(VecEnvWrapper):
     def step_wait(self) -> VecEnvStepReturn:
         obs, task_rewards, dones, infos = self.venv.step_wait()
         tracker = self.tracker
-        # SB3 marks a time-limit end with TimeLimit.truncated; every other done is a termination.
-        terminated = dones & ~np.array([bool(i.get("TimeLimit.truncated")) for i in infos])
-        done = np.flatnonzero(dones)
-        if done.size:
+        terminated = None
+        if tracker.reward_mode == "potential":  # the only mode that reads terminated
+            # SB3 marks a time-limit end with TimeLimit.truncated; every other done is a
+            # termination.
+            truncated = [bool(info.get("TimeLimit.truncated")) for info in infos]
+            terminated = dones & ~np.array(truncated)
+        # nonzero()[0]: a fraction of the cost of np.flatnonzero on small arrays.
+        done = dones.nonzero()[0].tolist()
+        if done:
             # A done row holds the next episode's first observation; the transition ends in
             # infos[i]["terminal_observation"], lifted with the index the episode ended with.
             terminal = [infos[i]["terminal_observation"] for i in done]
-            final_states = np.stack([tracker.states(o) for o in terminal])
+            # np.array: one C call, where np.stack loops over the rows in Python.
+            final_states = np.array([tracker.states(o) for o in terminal])
             rewards = tracker.step(
                 tracker.states(obs), dones, final_states, task_rewards, terminated
             )

@@ -442,6 +442,8 @@ class SegmentTracker:
         self.t = np.zeros(self.num_envs, dtype=np.int64)
         self.potential = np.zeros(self.num_envs, dtype=np.float64)
         self._one_hot = _one_hot_table(self.observation_space, self.state_key, task.n_indices)
+        # Adding an int64 array skips the scalar conversion of `t += 1` (half its cost).
+        self._ones = np.ones(self.num_envs, dtype=np.int64)
 
     def states(self, obs: Any) -> np.ndarray:
         """The task states in a batch of (unlifted) observations."""
@@ -501,12 +503,13 @@ class SegmentTracker:
         if self.task_reward_weight != 0.0 and task_rewards is None:
             raise ValueError("task_reward_weight != 0 needs the environment's task_rewards")
         before = self.index
-        self.t += 1
-        if restart is None or not restart.any():
+        self.t += self._ones
+        # count_nonzero: a fraction of the cost of ndarray.any() on small arrays.
+        if restart is None or not np.count_nonzero(restart):
             reward, self.index = self.task.reward_and_next_batch(states, self.t, before)
             self.ended_index = self.index
             return self._shape(reward, before, self.index, states, task_rewards, terminated)
-        rows = np.flatnonzero(restart)
+        rows = restart.nonzero()[0]
         # Index 0 at t = 0 makes the restart rows compute exactly reset's M(s_0, 0, 0).
         t, index = self.t.copy(), before.copy()
         t[rows] = 0
@@ -531,8 +534,10 @@ class SegmentTracker:
         self.ended_index[rows] = nxt[n:]
         step_reward = reward[:n].copy()
         step_reward[rows] = reward[n:]
-        ended_states = states.copy()
-        ended_states[rows] = final_states
+        ended_states = None
+        if self.reward_mode == "potential":  # the only mode that reads the states
+            ended_states = states.copy()
+            ended_states[rows] = final_states
         shaped = self._shape(
             step_reward, before, self.ended_index, ended_states, task_rewards, terminated
         )
@@ -557,10 +562,11 @@ class SegmentTracker:
         reward: np.ndarray,
         before: np.ndarray,
         after: np.ndarray,
-        states: np.ndarray,
+        states: np.ndarray | None,
         task_rewards: np.ndarray | None,
         terminated: np.ndarray | None,
     ) -> np.ndarray:
+        # ``states`` is read only in "potential" mode (callers may pass None otherwise).
         if self.reward_mode == "potential":
             potential = self._potentials(states, reward, before, after)
             potential[np.asarray(terminated, dtype=bool)] = 0.0
@@ -579,9 +585,8 @@ class SegmentTracker:
 
         ``index`` defaults to the current indices of all sub-environments.
         """
-        return lift_observation(
-            obs, self._one_hot[self.index if index is None else index], self.state_key
-        )
+        one_hot = self._one_hot.take(self.index if index is None else index, axis=0)
+        return lift_observation(obs, one_hot, self.state_key)
 
 
 class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
@@ -697,7 +702,7 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             rewards = self.tracker.step(states, restart=self._autoreset, **env_signals)
             self._autoreset = done
-        elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+        elif self.autoreset_mode == AutoresetMode.SAME_STEP and np.count_nonzero(done):
             # A done row holds the next episode's first observation; the transition ends in
             # infos["final_obs"], which is lifted with the index the episode ended with.
             final = np.flatnonzero(done)
