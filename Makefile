@@ -26,7 +26,7 @@ demo-acrobot: install
 
 test: install
 	$(BIN)/ruff check . && $(BIN)/ruff format --check .
-	$(BIN)/python -m pytest -n 2 -q
+	$(BIN)/python -m pytest -n 2 -q tests --doctest-modules wrappers/swirl_wrappers sb3_swirl
 
 test-slow: install
 	$(BIN)/python -m pytest -m slow -q
