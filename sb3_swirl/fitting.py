@@ -13,7 +13,7 @@ from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
 from sb3_swirl.segmentation import TransitionStateClustering
 from swirl_wrappers import TaskModel
-from swirl_wrappers.task import angle_features
+from swirl_wrappers.task import angle_features, check_angles
 
 Progress = Callable[[str], None]
 
@@ -157,12 +157,7 @@ def fit_task(
                 f"dims must be indices into the {state_dim} observation dimensions, got {dims}"
             )
     if angles is not None:
-        try:
-            angles = tuple(tuple(int(i) for i in angle) for angle in angles)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(
-                f"angles must be a sequence of sequences of ints, got {angles!r}"
-            ) from exc
+        angles = check_angles(angles)
         demos = [
             Demonstration(
                 np.concatenate(

@@ -42,7 +42,7 @@ def _as_float_array(value: Any, name: str, ndim: int) -> np.ndarray:
     return arr
 
 
-def _check_angles(angles: Any) -> tuple[tuple[int, ...], ...] | None:
+def check_angles(angles: Any) -> tuple[tuple[int, ...], ...] | None:
     """Validate ``TaskModel.angles``: ``None`` or non-empty sequences of non-negative ints."""
     if angles is None:
         return None
@@ -79,7 +79,7 @@ def angle_features(obs: np.ndarray, angles: Any) -> np.ndarray:
     array([ 0.,  1., -1.,  0.])
     """
     x = np.asarray(obs, dtype=np.float64)
-    checked = _check_angles(angles)
+    checked = check_angles(angles)
     if checked is None:
         raise ValueError("angles must not be None")
     used = max(i for angle in checked for i in angle)
@@ -382,7 +382,7 @@ class TaskModel:
             raise ValueError(
                 f"TaskModel.dims must be a sequence of ints, got {self.dims!r}"
             ) from exc
-        angles = _check_angles(self.angles)
+        angles = check_angles(self.angles)
         if angles is not None and dims is None:
             raise ValueError(
                 "TaskModel.dims must be given with angles: it lists the observation entries "
