@@ -114,7 +114,8 @@ class SwirlVecEnv(VecEnvWrapper):
             truncated = [bool(info.get("TimeLimit.truncated")) for info in infos]
             terminated = dones & ~np.array(truncated)
         # nonzero()[0]: a fraction of the cost of np.flatnonzero on small arrays.
-        done = dones.nonzero()[0].tolist()
+        rows = dones.nonzero()[0]
+        done = rows.tolist()
         if done:
             # A done row holds the next episode's first observation; the transition ends in
             # infos[i]["terminal_observation"], lifted with the index the episode ended with.
@@ -124,7 +125,7 @@ class SwirlVecEnv(VecEnvWrapper):
             rewards = tracker.step(
                 tracker.states(obs), dones, final_states, task_rewards, terminated
             )
-            ended = tracker.ended_index[done]
+            ended = tracker.ended_index[rows]  # an array index: a list would be converted
             if tracker.state_key is None:  # Box: the final states are the whole observations
                 for i, lifted in zip(done, tracker.lift(final_states, ended), strict=True):
                     infos[i]["terminal_observation"] = lifted

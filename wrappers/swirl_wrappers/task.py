@@ -542,11 +542,12 @@ class TaskModel:
         z = z.take(index + _row_starts(n, m), axis=0)
         z -= tb.offsets.take(index, axis=0)
         z *= z
-        q = z.dot(tb.halves_t)
-        inside = q[:, 1] <= 1.0
+        # (2, n): contiguous rows, which compare and return several times faster than columns.
+        q = tb.halves.dot(z.T)
+        inside = q[1] <= 1.0
         if tb.timed and t is not None:
             inside &= (t >= tb.t_lo_array[index]) & (t <= tb.t_hi_array[index])
-        return q[:, 0], index + inside
+        return q[0], index + inside
 
     def next_segment(
         self, obs: np.ndarray, t: np.ndarray | float | None, index: np.ndarray | int
@@ -706,7 +707,6 @@ class _Tables:
     factors_t: np.ndarray
     offsets: np.ndarray
     halves: np.ndarray
-    halves_t: np.ndarray
     factor_list: list[np.ndarray]
     offset_list: list[np.ndarray]
     t_lo: list[float]
@@ -771,7 +771,6 @@ class _Tables:
             factors_t=np.ascontiguousarray(factors.reshape(-1, factors.shape[-1]).T),
             offsets=offsets,
             halves=halves,
-            halves_t=np.ascontiguousarray(halves.T),
             factor_list=[np.ascontiguousarray(f) for f in factors],
             offset_list=list(offsets),
             t_lo=t_lo,

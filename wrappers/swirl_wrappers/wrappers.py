@@ -439,11 +439,19 @@ class SegmentTracker:
         )
         self.index = np.zeros(self.num_envs, dtype=np.int64)
         self.ended_index = self.index
-        self.t = np.zeros(self.num_envs, dtype=np.int64)
         self.potential = np.zeros(self.num_envs, dtype=np.float64)
         self._one_hot = _one_hot_table(self.observation_space, self.state_key, task.n_indices)
-        # Adding an int64 array skips the scalar conversion of `t += 1` (half its cost).
-        self._ones = np.ones(self.num_envs, dtype=np.int64)
+        # Episode steps are a clock minus each episode's start: no per-step array update, and
+        # `t` is only built where a region has a time window (or on request).
+        self._clock = 0
+        self._start = np.zeros(self.num_envs, dtype=np.int64)
+        self._timed = any(r.time_bounds is not None for r in task.regions)
+        self._zeros = np.zeros(self.num_envs, dtype=np.int64)
+
+    @property
+    def t(self) -> np.ndarray:
+        """Steps taken in each sub-environment's current episode (a new int64 array)."""
+        return self._clock - self._start
 
     def states(self, obs: Any) -> np.ndarray:
         """The task states in a batch of (unlifted) observations."""
@@ -456,10 +464,10 @@ class SegmentTracker:
         """
         if mask is None:
             mask = np.ones(self.num_envs, dtype=bool)
-        zeros = np.zeros(int(np.count_nonzero(mask)), dtype=np.int64)
+        zeros = self._zeros[: int(np.count_nonzero(mask))]
         # New arrays, not in-place writes: earlier infos may hold the old ones.
-        self.t, self.index = self.t.copy(), self.index.copy()
-        self.t[mask] = 0
+        self.index = self.index.copy()
+        self._start[mask] = self._clock
         reward, self.index[mask] = self.task.reward_and_next_batch(states[mask], zeros, zeros)
         self.ended_index = self.index
         if self.reward_mode == "potential":
@@ -503,48 +511,44 @@ class SegmentTracker:
         if self.task_reward_weight != 0.0 and task_rewards is None:
             raise ValueError("task_reward_weight != 0 needs the environment's task_rewards")
         before = self.index
-        self.t += self._ones
+        self._clock += 1
+        t = self.t if self._timed else None
         # count_nonzero: a fraction of the cost of ndarray.any() on small arrays.
         if restart is None or not np.count_nonzero(restart):
-            reward, self.index = self.task.reward_and_next_batch(states, self.t, before)
+            reward, self.index = self.task.reward_and_next_batch(states, t, before)
             self.ended_index = self.index
             return self._shape(reward, before, self.index, states, task_rewards, terminated)
         rows = restart.nonzero()[0]
-        # Index 0 at t = 0 makes the restart rows compute exactly reset's M(s_0, 0, 0).
-        t, index = self.t.copy(), before.copy()
-        t[rows] = 0
-        index[rows] = 0
+        zeros = self._zeros[: len(rows)]
         if final_states is None:
-            reward, self.index = self.task.reward_and_next_batch(states, t, index)
+            # Index 0 at t = 0 makes the restart rows compute exactly reset's M(s_0, 0, 0).
+            index = before.copy()
+            index[rows] = 0
+            self._start[rows] = self._clock
+            reward, self.index = self.task.reward_and_next_batch(
+                states, self.t if self._timed else None, index
+            )
             # A restart row made no transition: its potential restarts from Phi(s_0).
             not_terminal = None if terminated is None else np.where(restart, False, terminated)
             reward = self._shape(reward, index, self.index, states, task_rewards, not_terminal)
             reward[rows] = 0.0
-            self.ended_index, self.t = self.index, t
+            self.ended_index = self.index
             return reward
-        # One pass over the num_envs current states and the final states of ended episodes.
+        # One pass: the num_envs transitions (ending in the final states at the restart rows),
+        # then the first states of the new episodes (index 0 at t = 0, as in reset).
         n = self.num_envs
-        reward, nxt = self.task.reward_and_next_batch(
-            np.concatenate((states, final_states)),
-            np.concatenate((t, self.t[rows])),
-            np.concatenate((index, before[rows])),
-        )
-        self.index, self.t = nxt[:n], t
-        self.ended_index = nxt[:n].copy()
-        self.ended_index[rows] = nxt[n:]
-        step_reward = reward[:n].copy()
-        step_reward[rows] = reward[n:]
-        ended_states = None
-        if self.reward_mode == "potential":  # the only mode that reads the states
-            ended_states = states.copy()
-            ended_states[rows] = final_states
-        shaped = self._shape(
-            step_reward, before, self.ended_index, ended_states, task_rewards, terminated
-        )
+        x = np.concatenate((states, states[rows]))
+        x[rows] = final_states
+        if self._timed:
+            t = np.concatenate((t, zeros))
+        reward, nxt = self.task.reward_and_next_batch(x, t, np.concatenate((before, zeros)))
+        self.ended_index = nxt[:n]
+        self.index = nxt[:n].copy()
+        self.index[rows] = nxt[n:]
+        self._start[rows] = self._clock  # in place: `t` hands out new arrays
+        shaped = self._shape(reward[:n], before, self.ended_index, x[:n], task_rewards, terminated)
         if self.reward_mode == "potential":
-            self.potential[rows] = self._potentials(
-                states[rows], reward[rows], index[rows], self.index[rows]
-            )
+            self.potential[rows] = self._potentials(states[rows], reward[n:], zeros, nxt[n:])
         return shaped
 
     def _potentials(
@@ -717,11 +721,14 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
                 final_obs[i] = self.tracker.lift(final_obs[i], self.tracker.ended_index[i])
         else:
             rewards = self.tracker.step(states, **env_signals)
-        infos[SEGMENT_KEY] = self.tracker.index.copy()
-        infos["task_reward"] = np.asarray(task_rewards).copy()
+        # The tracker never writes into an index array it has published: no copy needed.
+        infos[SEGMENT_KEY] = self.tracker.index
+        infos["task_reward"] = np.array(task_rewards)  # the sub-envs reuse their reward buffer
         infos["segment_reward"] = rewards.copy()
-        for key in (SEGMENT_KEY, "task_reward", "segment_reward"):
-            infos["_" + key] = self._all.copy()
+        # One all-true mask shared by the three keys (a copy each costs more than the keys).
+        infos["_" + SEGMENT_KEY] = infos["_task_reward"] = infos["_segment_reward"] = (
+            self._all.copy()
+        )
         return (
             self.tracker.lift(obs),
             rewards,
