@@ -205,7 +205,7 @@ def throughput(steps: int, repeats: int) -> dict[str, Any]:
 
     preset = PRESETS["parking"]
     demos = collect_demos(preset.env_id, preset.n_demos, seed=0, progress=False)
-    task = fit_task(demos, random_state=0)
+    task = fit_task(demos, random_state=0, **preset.fit_kwargs)
     wrapper_kwargs = _swirl_wrapper_kwargs(load_hyperparams("swirl_dqn", preset.env_id))
     kwargs = _algo_kwargs(load_hyperparams("dqn", preset.env_id))
     kwargs.pop("policy", None)

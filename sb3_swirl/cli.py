@@ -37,6 +37,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         segmentation["window"] = args.window
     if args.min_demo_fraction is not None:
         segmentation["min_demo_fraction"] = args.min_demo_fraction
+    if args.reg_covar is not None:
+        segmentation["reg_covar"] = args.reg_covar
     reward = {"metric": args.metric}
     dims = None if args.dims is None else [int(d) for d in args.dims.split(",") if d]
     angles = None
@@ -134,6 +136,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--indicator", default="gmm", choices=["gmm", "velocity", "linear"])
     p.add_argument("--window", type=int, default=None, help="window length of the indicator")
     p.add_argument("--min-demo-fraction", type=float, default=None)
+    p.add_argument(
+        "--reg-covar",
+        type=float,
+        default=None,
+        help="floor of each region's covariance, relative to each axis's variance "
+        "(few demos: raise it; parking with 5 demos: 0.1)",
+    )
     p.add_argument("--metric", default="mahalanobis", choices=["mahalanobis", "euclidean"])
     p.add_argument(
         "--dims", default=None, help="comma-separated observation dims to use (e.g. 0,1,3)"

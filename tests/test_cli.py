@@ -45,6 +45,19 @@ def test_fit_with_angles_matches_the_python_api(tmp_path):
     np.testing.assert_array_equal(from_cli.regions[0].mean, direct.regions[0].mean)
 
 
+def test_fit_reg_covar_reaches_the_regions(tmp_path):
+    from sb3_swirl.fitting import fit_task
+
+    demos_path, task_path = tmp_path / "park.npz", tmp_path / "park.json"
+    main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "5", "-o", str(demos_path), "-q"])
+    assert main(["fit", str(demos_path), "-o", str(task_path), "--reg-covar", "0.1"]) == 0
+    direct = fit_task(load_demos(demos_path), reg_covar=0.1, random_state=0)
+    thin = fit_task(load_demos(demos_path), random_state=0)
+    from_cli = TaskModel.from_json(task_path)
+    np.testing.assert_array_equal(from_cli.regions[0].covariance, direct.regions[0].covariance)
+    assert np.linalg.det(from_cli.regions[0].covariance) > np.linalg.det(thin.regions[0].covariance)
+
+
 def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
     assert main(["fit", str(tmp_path / "missing.npz"), "-o", str(tmp_path / "t.json")]) == 2
     assert "missing.npz" in capsys.readouterr().err
