@@ -12,6 +12,7 @@ from stable_baselines3 import DQN
 import sb3_swirl.envs  # noqa: F401  (registers the envs)
 from sb3_swirl.demos import Demonstration
 from sb3_swirl.dqn import SwirlDQN, find_task, make_swirl_env
+from sb3_swirl.experiments import PRESETS
 from sb3_swirl.features import RBFFeaturesExtractor
 from swirl_wrappers import QuadraticReward, Region, SwirlWrapper, TaskModel
 
@@ -73,7 +74,7 @@ def parking():
     from sb3_swirl.supervisors import collect_demos
 
     demos = collect_demos(PARKING, 5, seed=0)
-    return demos, fit_task(demos, random_state=0)
+    return demos, fit_task(demos, random_state=0, **PRESETS["parking"].fit_kwargs)
 
 
 def q_values(model, obs: np.ndarray) -> np.ndarray:
@@ -204,32 +205,31 @@ def test_bc_agrees_with_parking_demos(parking):
         np.testing.assert_array_equal(model.q_net(x).numpy(), model.q_net_target(x).numpy())
 
 
+def test_tuned_swirl_dqn_parks_after_a_short_run(parking):
+    """The shipped pipeline (preset task, tuned zoo config) parks after 2000 steps."""
+    from sb3_swirl.experiments import _algo_kwargs, _swirl_wrapper_kwargs, load_hyperparams
+
+    demos, task = parking
+    hyperparams = load_hyperparams("swirl_dqn", PARKING)
+    kwargs = _algo_kwargs(hyperparams)
+    env = SwirlWrapper(gym.make(PARKING), task, **_swirl_wrapper_kwargs(hyperparams))
+    model = SwirlDQN(hyperparams["policy"], env, demonstrations=demos, seed=0, **kwargs)
+    model.learn(2_000)
+    assert success_count(model, env, 20, seed=100) >= 16
+    untrained = DQN("MlpPolicy", gym.make(PARKING), seed=0)
+    assert success_count(untrained, gym.make(PARKING), 20, seed=100) == 0
+
+
 @pytest.mark.slow
 def test_swirl_dqn_learns_parking_where_dqn_does_not(parking):
+    from sb3_swirl.experiments import train_and_evaluate
+
     demos, task = parking
-    kwargs = dict(
-        learning_rate=1e-3,
-        learning_starts=200,
-        exploration_final_eps=0.02,
-        exploration_fraction=0.5,
-        target_update_interval=500,
-        buffer_size=50_000,
-        seed=0,
-    )
-    env = SwirlWrapper(gym.make(PARKING), task, reward_scale=0.01, region_bonus=1.0)
-    swirl = SwirlDQN(
-        "MlpPolicy",
-        env,
-        demonstrations=demos,
-        prefill_replay=True,
-        exploration_initial_eps=0.1,
-        **kwargs,
-    )
-    swirl.learn(30_000)
-    plain = DQN("MlpPolicy", gym.make(PARKING), **kwargs)
-    plain.learn(30_000)
-    assert success_count(swirl, env, 20, seed=100) >= 1
-    assert success_count(plain, gym.make(PARKING), 20, seed=100) == 0
+    budget = dict(total_timesteps=10_000, seed=0, progress=False)
+    swirl = train_and_evaluate("swirl_dqn", PRESETS["parking"], task=task, demos=demos, **budget)
+    plain = train_and_evaluate("dqn", PRESETS["parking"], **budget)
+    assert swirl["rollouts_to_target"] is not None and swirl["final_success"] >= 0.8
+    assert plain["best_success"] == 0.0
 
 
 def test_save_load_round_trip_and_no_second_bc(tmp_path, monkeypatch):
