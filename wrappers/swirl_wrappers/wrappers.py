@@ -529,7 +529,9 @@ class SegmentTracker:
                 states, self.t if self._timed else None, index
             )
             # A restart row made no transition: its potential restarts from Phi(s_0).
-            not_terminal = None if terminated is None else np.where(restart, False, terminated)
+            not_terminal = None
+            if self.reward_mode == "potential":  # the only mode that reads terminated
+                not_terminal = np.where(restart, False, terminated)
             reward = self._shape(reward, index, self.index, states, task_rewards, not_terminal)
             reward[rows] = 0.0
             self.ended_index = self.index
