@@ -29,7 +29,8 @@ alternating and medians compared. Target: wrapped / raw >= 0.95.
 Writes ``results/sample_efficiency/results.json``. Not a test (hours of CPU at full size).
 
 Run: ``.venv/bin/python benchmarks/sample_efficiency.py [--quick] [--seeds 10 11 12 13 14]
-[--tasks parking acrobot] [--jobs 2]``.
+[--tasks parking acrobot] [--jobs 2] [--total-timesteps N --eval-freq M] [--out DIR]
+[--reuse]``.
 """
 
 from __future__ import annotations
@@ -52,18 +53,29 @@ THROUGHPUT_TARGET = 0.95
 ALGOS = ("swirl_dqn", "dqn")
 
 
-def _preset(task: str, quick: bool, total_timesteps: int | None) -> tuple[Any, int]:
+def _preset(
+    task: str, quick: bool, total_timesteps: int | None, eval_freq: int | None = None
+) -> tuple[Any, int]:
     from sb3_swirl.experiments import PRESETS
 
     preset = PRESETS[task]
     steps = preset.total_timesteps if total_timesteps is None else total_timesteps
+    if eval_freq is not None:
+        preset = dataclasses.replace(preset, eval_freq=eval_freq)
     if quick:
         preset = dataclasses.replace(preset, eval_freq=500, n_eval_episodes=3)
         steps = min(steps, 1_500)
     return preset, steps
 
 
-def run_one(task: str, algo: str, seed: int, quick: bool, total_timesteps: int | None) -> dict:
+def run_one(
+    task: str,
+    algo: str,
+    seed: int,
+    quick: bool,
+    total_timesteps: int | None,
+    eval_freq: int | None = None,
+) -> dict:
     """Train one method on one seed of one task; returns ``train_and_evaluate``'s record."""
     import torch
 
@@ -71,7 +83,7 @@ def run_one(task: str, algo: str, seed: int, quick: bool, total_timesteps: int |
     import sb3_swirl.envs  # noqa: F401  (registers the envs)
     from sb3_swirl.experiments import train_and_evaluate
 
-    preset, steps = _preset(task, quick, total_timesteps)
+    preset, steps = _preset(task, quick, total_timesteps, eval_freq)
     fitted = demos = None
     if algo == "swirl_dqn":
         from sb3_swirl.fitting import fit_task
@@ -263,6 +275,12 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="override the presets' step budget (the same for both methods)",
     )
+    parser.add_argument(
+        "--eval-freq",
+        type=int,
+        default=None,
+        help="override the presets' steps between evaluations (long budgets: evaluate less)",
+    )
     parser.add_argument("--no-throughput", action="store_true", help="skip the throughput check")
     parser.add_argument("--out", default="results/sample_efficiency")
     parser.add_argument(
@@ -290,12 +308,12 @@ def main(argv: list[str] | None = None) -> int:
             flush=True,
         )
         records = Parallel(n_jobs=args.jobs)(
-            delayed(run_one)(task, algo, seed, args.quick, args.total_timesteps)
+            delayed(run_one)(task, algo, seed, args.quick, args.total_timesteps, args.eval_freq)
             for task, algo, seed in jobs
         )
     results: dict[str, Any] = {"seeds": seeds, "quick": args.quick, "tasks": {}}
     for task in args.tasks:
-        preset, steps = _preset(task, args.quick, args.total_timesteps)
+        preset, steps = _preset(task, args.quick, args.total_timesteps, args.eval_freq)
         by_seed = {(r["algo"], r["seed"]): r for r in records if r["task"] == task}
         rows = [
             compare_seed(task, by_seed["swirl_dqn", s], by_seed["dqn", s], preset.target_success)
