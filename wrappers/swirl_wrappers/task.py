@@ -426,6 +426,11 @@ class TaskModel:
         return len(self.regions) + 1
 
     @property
+    def timed(self) -> bool:
+        """Whether some region has a time window (then ``next_segment`` reads ``t``)."""
+        return self._tables.timed
+
+    @property
     def task_dim(self) -> int:
         """Dimension of task space (where regions and rewards live)."""
         return self.regions[0].mean.size

@@ -445,7 +445,7 @@ class SegmentTracker:
         # `t` is only built where a region has a time window (or on request).
         self._clock = 0
         self._start = np.zeros(self.num_envs, dtype=np.int64)
-        self._timed = any(r.time_bounds is not None for r in task.regions)
+        self._timed = task.timed
         self._zeros = np.zeros(self.num_envs, dtype=np.int64)
 
     @property
