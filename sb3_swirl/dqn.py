@@ -172,6 +172,8 @@ class SwirlDQN(DQN):
       ``bc_margin``, so it does not inflate Q; ``"cross_entropy"`` is the paper's softmax.
     * ``demo_loss_coef > 0`` (default 1) keeps that supervised loss on a segment-balanced demo
       batch in every Q-learning update, which kept the BC start alive (and improving) above.
+      ``save`` stores the lifted demo pairs with the model, so a loaded model trains on with
+      the same loss (SB3 saves the replay buffer only on request: ``save_replay_buffer``).
     * ``bc_td_coef > 0`` adds a 1-step TD loss on the demo transitions during BC (off by
       default: with ``reward_scale=1`` it lowered the BC accuracy from 0.90 to 0.83 on parking).
     * ``prefill_replay=True`` puts the demo transitions in the replay buffer.
@@ -314,6 +316,9 @@ class SwirlDQN(DQN):
         self.demo_loss_coef = demo_loss_coef
         self._bc_done = False
         self.bc_n_pairs_ = 0
+        # The lifted demo pairs of the supervised loss: saved with the model, so that training
+        # goes on with the same loss after `load` (the tensors are rebuilt from them).
+        self._demo_data: dict[str, np.ndarray] | None = None
         self._demo: dict[str, th.Tensor] | None = None
         self.task: TaskModel | None = None
         self.task_json: str | None = None
@@ -355,6 +360,9 @@ class SwirlDQN(DQN):
                 fe_kwargs["n_indices"] = self.task.n_indices
                 self.policy_kwargs = {**self.policy_kwargs, "features_extractor_kwargs": fe_kwargs}
         super()._setup_model()
+        if self._demo_data is not None and self._demo is None:  # after `load`
+            self._demo = self._demo_tensors(self._demo_data)
+            self._demo_gen = self._rng(3)
 
     def _setup_learn(self, *args: Any, **kwargs: Any) -> tuple[int, Any]:
         result = super()._setup_learn(*args, **kwargs)
@@ -572,6 +580,7 @@ class SwirlDQN(DQN):
             )
             return {"loss": float("nan"), "accuracy": float("nan"), "n_pairs": 0}
         data = {k: np.concatenate([d[k] for d in lifted]) for k in lifted[0] if k != "state"}
+        self._demo_data = data
         self._demo = self._demo_tensors(data)
         self._demo_gen = self._rng(3)
         info = self._behaviour_clone(self._demo)

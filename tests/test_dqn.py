@@ -232,7 +232,7 @@ def test_swirl_dqn_learns_parking_where_dqn_does_not(parking):
     assert plain["best_success"] == 0.0
 
 
-def test_save_load_round_trip_and_no_second_bc(tmp_path, monkeypatch):
+def test_save_load_round_trip_keeps_the_demo_loss_and_no_second_bc(tmp_path, monkeypatch):
     demos = point_demos(2)
     model = SwirlDQN(
         "MlpPolicy", point_env(), demonstrations=demos, bc_epochs=20, learning_starts=50, seed=0
@@ -252,13 +252,22 @@ def test_save_load_round_trip_and_no_second_bc(tmp_path, monkeypatch):
     # also without an env (prediction only): the task comes from the file
     assert SwirlDQN.load(tmp_path / "model.zip").task.to_json() == model.task.to_json()
 
+    # the supervised demo loss goes on after load, on the same demo pairs
+    assert set(loaded._demo) == set(model._demo)
+    for key, tensor in model._demo.items():
+        assert th.equal(loaded._demo[key], tensor), key
     loaded.demonstrations = demos
 
     def fail():
         raise AssertionError("pretrain ran again after load")
 
+    supervised = []
     monkeypatch.setattr(loaded, "pretrain", fail)
-    loaded.learn(10)
+    monkeypatch.setattr(
+        loaded, "_supervised_loss", lambda *a: supervised.append(1) or model._supervised_loss(*a)
+    )
+    loaded.learn(20, reset_num_timesteps=False)
+    assert supervised, "no demo loss in the updates after load"
 
 
 def test_rbf_features_shape_range_and_gradient():
