@@ -590,8 +590,6 @@ class SwirlDQN(DQN):
 
     def _demo_tensors(self, data: dict[str, np.ndarray]) -> dict[str, th.Tensor]:
         def tensor(a: np.ndarray, dtype: th.dtype | None = None) -> th.Tensor:
-            if self._vec_normalize_env is not None and a.ndim == 2:
-                a = self._vec_normalize_env.normalize_obs(a)
             return th.as_tensor(a, dtype=dtype, device=self.device)
 
         # every segment weighs the same, so short segments are not drowned out by long ones
@@ -605,6 +603,19 @@ class SwirlDQN(DQN):
             "weights": th.as_tensor(1.0 / counts[data["segment"]], dtype=th.float64),
         }
 
+    def _demo_obs(self, key: str, rows: th.Tensor | None = None) -> th.Tensor:
+        """Demo observations (``"obs"`` or ``"next_obs"``) as the Q-network sees them now.
+
+        The demo tensors hold raw observations; under ``VecNormalize`` they are normalised with
+        its current statistics at every use, as SB3's replay buffer does with its samples.
+        """
+        assert self._demo is not None
+        obs = self._demo[key] if rows is None else self._demo[key][rows]
+        if self._vec_normalize_env is None:
+            return obs
+        normalized = self._vec_normalize_env.normalize_obs(obs.cpu().numpy())
+        return th.as_tensor(normalized, device=self.device)
+
     def _supervised_loss(self, q: th.Tensor, actions: th.Tensor) -> th.Tensor:
         if self.bc_loss == "cross_entropy":
             return F.cross_entropy(q, actions)
@@ -612,7 +623,7 @@ class SwirlDQN(DQN):
         return ((q + margin).max(dim=1).values - q.gather(1, actions[:, None])[:, 0]).mean()
 
     def _behaviour_clone(self, demo: dict[str, th.Tensor]) -> dict[str, float]:
-        obs, actions = demo["obs"], demo["actions"]
+        obs, actions = self._demo_obs("obs"), demo["actions"]
         n = len(actions)
         n_batches = -(-n // self.bc_batch_size)
         gen = self._rng(2)
@@ -631,7 +642,8 @@ class SwirlDQN(DQN):
                 loss = self._supervised_loss(q, a)
                 if self.bc_td_coef > 0:
                     with th.no_grad():
-                        next_q = self.q_net_target(demo["next_obs"][batch]).max(dim=1).values
+                        next_obs = self._demo_obs("next_obs", batch)
+                        next_q = self.q_net_target(next_obs).max(dim=1).values
                         target = demo["reward"][batch] + (
                             demo["not_done"][batch] * self.gamma * next_q
                         )
@@ -671,7 +683,8 @@ class SwirlDQN(DQN):
             loss = F.smooth_l1_loss(current, target)
             rows = th.multinomial(demo["weights"], batch_size, True, generator=self._demo_gen)
             rows = rows.to(self.device)
-            demo_loss = self._supervised_loss(self.q_net(demo["obs"][rows]), demo["actions"][rows])
+            demo_q = self.q_net(self._demo_obs("obs", rows))
+            demo_loss = self._supervised_loss(demo_q, demo["actions"][rows])
             losses.append(loss.item())
             demo_losses.append(demo_loss.item())
             self.policy.optimizer.zero_grad()

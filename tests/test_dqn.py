@@ -270,6 +270,28 @@ def test_save_load_round_trip_keeps_the_demo_loss_and_no_second_bc(tmp_path, mon
     assert supervised, "no demo loss in the updates after load"
 
 
+def test_demo_loss_normalises_demo_obs_with_the_current_vec_normalize_stats(monkeypatch):
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    venv = VecNormalize(DummyVecEnv([point_env]), norm_reward=False)
+    model = SwirlDQN(
+        "MlpPolicy", venv, demonstrations=point_demos(2), bc_epochs=2, learning_starts=50, seed=0
+    )
+    model.learn(60)  # BC, then a few updates while the statistics move
+    venv.obs_rms.mean = venv.obs_rms.mean + 0.5  # statistics unlike those at BC time
+    seen = []
+    forward = model.q_net.forward
+    monkeypatch.setattr(model.q_net, "forward", lambda obs: seen.append(obs) or forward(obs))
+    model.train(gradient_steps=1, batch_size=8)
+    raw = model._demo["obs"].numpy()
+    demo_batch = seen[-1].numpy()  # the last Q-network call is the demo batch's
+    normalised = venv.normalize_obs(raw)
+    matches = [
+        np.where(np.isclose(normalised, row, atol=1e-6).all(axis=1))[0] for row in demo_batch
+    ]
+    assert all(len(m) for m in matches), "demo obs not normalised with the current statistics"
+
+
 def test_rbf_features_shape_range_and_gradient():
     space = spaces.Box(low=np.array([0, -1, 0, 0, 0]), high=np.array([1, 1, 1, 1, 1]))
     fe = RBFFeaturesExtractor(space, n_centers_per_dim=4, sigma=0.1, n_indices=3)
