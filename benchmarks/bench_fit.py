@@ -1,12 +1,16 @@
 """Fit time of ``fit_task`` against the number of demonstrations (about 1000 steps, 4-D each).
 
 Targets: 15 demos <= 5 s, 1000 demos <= 60 s, and growth at most linear (the per-demo time
-should not rise with the number of demos). Run: ``python benchmarks/bench_fit.py [--quick]``.
+should not rise with the number of demos). ``--kernel`` fits with the approximate RBF kernel
+PCA (Nyström, 200 landmarks; sigma 10, on the scale of these demos) and reports the peak
+memory, which must stay bounded at 1000 demos x 1000 steps.
+Run: ``python benchmarks/bench_fit.py [--quick] [--kernel]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
 import time
 
 from sb3_swirl.demos import make_piecewise_linear_demos
@@ -30,17 +34,20 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="small sizes, a smoke run")
     parser.add_argument("--indicator", default="gmm", choices=["gmm", "velocity", "linear"])
+    parser.add_argument("--kernel", action="store_true", help="approximate RBF kernel PCA")
     args = parser.parse_args(argv)
+    kernel = {"kernel": "rbf", "kernel_sigma": 10.0} if args.kernel else {}
     sizes, steps = ([5, 20], 200) if args.quick else ([15, 60, 240, 1000], 1000)
 
-    print(f"fit_task, indicator={args.indicator}, 4-D demos of ~{steps} steps")
+    features = "RBF kernel PCA" if kernel else "no kernel"
+    print(f"fit_task, indicator={args.indicator}, {features}, 4-D demos of ~{steps} steps")
     print(f"{'demos':>6} {'steps':>9} {'fit s':>8} {'ms/demo':>8} {'ratio':>6} {'regions':>7}")
     base = None
     rows = []
     for n in sizes:
         demos = _demos(n, steps, seed=n)
         start = time.perf_counter()
-        task = fit_task(demos, indicator=args.indicator, random_state=0)
+        task = fit_task(demos, indicator=args.indicator, random_state=0, **kernel)
         elapsed = time.perf_counter() - start
         per_demo = elapsed / n
         base = per_demo if base is None else base
@@ -55,6 +62,8 @@ def main(argv: list[str] | None = None) -> None:
         print(f"target 15 demos <= 5 s: {small:.2f} s ({'ok' if small <= 5 else 'MISSED'})")
         print(f"target 1000 demos <= 60 s: {large:.2f} s ({'ok' if large <= 60 else 'MISSED'})")
     print("ratio = per-demo time relative to the smallest set (<= ~1 means at most linear)")
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
+    print(f"peak resident memory of this process: {peak_mb:.0f} MB")
 
 
 if __name__ == "__main__":
