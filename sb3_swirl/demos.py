@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 import os
+import zipfile
+import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -156,9 +158,10 @@ def as_demonstrations(data: Any, window: int | None = None) -> list[Demonstratio
                 f"got {data.shape}; pass a list of (T+1, d) arrays for ragged lengths"
             )
         data = list(data)
-    if isinstance(data, Demonstration) or not isinstance(data, Iterable):
+    if isinstance(data, Demonstration | Mapping) or not isinstance(data, Iterable):
         raise ValueError(
             f"expected a sequence of demonstrations or a .npz path, got {type(data).__name__}"
+            + ("; a single demonstration? pass a list of them" if isinstance(data, Mapping) else "")
         )
     items = list(data)
     if not items:
@@ -212,36 +215,71 @@ def save_demos(demos: Any, path: str | os.PathLike) -> None:
 
 
 def load_demos(path: str | os.PathLike) -> list[Demonstration]:
-    """Read demonstrations written by :func:`save_demos`.
+    """Read demonstrations written by :func:`save_demos`, validated as by :func:`as_demonstrations`.
 
     Raises
     ------
     ValueError
-        If the file cannot be read or is not an sb3-swirl demonstration file.
+        If the file cannot be read, is not an sb3-swirl demonstration file of this format
+        version, or holds invalid demonstrations (the message names the file and the demo).
     """
+    name = os.fspath(path)
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            files = set(npz.files)
-            if "n_demos" not in files or "obs_0" not in files:
-                raise ValueError(
-                    f"{os.fspath(path)} is not an sb3-swirl demonstration file "
-                    "(expected keys n_demos, obs_0, obs_1, ...; write one with save_demos)"
-                )
-            n = int(npz["n_demos"])
-            demos = []
-            for i in range(n):
-                if f"obs_{i}" not in files:
-                    raise ValueError(f"{os.fspath(path)}: demo {i} (key obs_{i}) is missing")
-                demos.append(
-                    Demonstration(
-                        npz[f"obs_{i}"],
-                        npz[f"acts_{i}"] if f"acts_{i}" in files else None,
-                        npz[f"rews_{i}"] if f"rews_{i}" in files else None,
-                    )
-                )
-    except (OSError, EOFError) as exc:
-        raise ValueError(f"cannot read demonstrations from {os.fspath(path)}: {exc}") from exc
-    return demos
+        loaded = np.load(path, allow_pickle=False)
+    except (OSError, EOFError, ValueError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"cannot read demonstrations from {name}: {exc}") from exc
+    if not isinstance(loaded, np.lib.npyio.NpzFile):
+        raise ValueError(
+            f"{name} holds a single array, not an sb3-swirl demonstration file (an .npz "
+            "archive written by save_demos)"
+        )
+    with loaded as npz:
+
+        def read(key: str) -> np.ndarray:
+            try:
+                return npz[key]
+            except (OSError, EOFError, ValueError, zipfile.BadZipFile, zlib.error) as exc:
+                raise ValueError(f"{name}: cannot read {key} (corrupted?): {exc}") from exc
+
+        files = set(npz.files)
+        if "n_demos" not in files or "obs_0" not in files:
+            raise ValueError(
+                f"{name} is not an sb3-swirl demonstration file "
+                "(expected keys format, n_demos, obs_0, obs_1, ...; write one with save_demos)"
+            )
+        version = str(read("format")) if "format" in files else None
+        if version != _NPZ_FORMAT:
+            raise ValueError(
+                f"{name}: unsupported demonstration file format {version!r}; this sb3-swirl "
+                f"reads {_NPZ_FORMAT!r}"
+            )
+        n_demos = read("n_demos")
+        if n_demos.shape != () or n_demos.dtype.kind not in "iu" or int(n_demos) < 0:
+            raise ValueError(f"{name}: n_demos must be one integer >= 0, got {n_demos!r}")
+        n = int(n_demos)
+        expected = {"format", "n_demos"} | {
+            f"{field}_{i}" for i in range(n) for field in ("obs", "acts", "rews")
+        }
+        if files - expected:
+            raise ValueError(
+                f"{name}: unexpected keys {sorted(files - expected)} for n_demos={n} "
+                "(a damaged or hand-edited file?)"
+            )
+        demos = []
+        for i in range(n):
+            if f"obs_{i}" not in files:
+                raise ValueError(f"{name}: demo {i} (key obs_{i}) is missing")
+            demos.append(
+                {
+                    "observations": read(f"obs_{i}"),
+                    "actions": read(f"acts_{i}") if f"acts_{i}" in files else None,
+                    "rewards": read(f"rews_{i}") if f"rews_{i}" in files else None,
+                }
+            )
+    try:
+        return as_demonstrations(demos)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from exc
 
 
 def to_imitation(demos: Any) -> list[Any]:

@@ -182,11 +182,46 @@ def test_demo_shorter_than_window_reports_lengths():
     assert len(as_demonstrations(data, window=2)) == 3  # 4 states suffice for window 2
 
 
+def _damaged_demo_files(tmp_path):
+    """(path, expected message) for each way a demonstration file can be damaged."""
+    good = tmp_path / "good.npz"
+    save_demos([np.zeros((6, 2)), np.ones((5, 2))], good)
+    data = dict(np.load(good))
+
+    def write(name, **changes):
+        path = tmp_path / name
+        np.savez(path, **{**data, **changes})
+        return path
+
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(good.read_bytes()[:200])
+    np.save(tmp_path / "array.npy", np.zeros((3, 2)))
+    nan = data["obs_1"].copy()
+    nan[3, 0] = np.nan
+    return [
+        (truncated, "cannot read demonstrations"),
+        (tmp_path / "array.npy", "holds a single array"),
+        (write("v99.npz", format=np.array("sb3_swirl.demos/99")), "unsupported .* format"),
+        (write("count.npz", n_demos=np.array(1)), "unexpected keys"),
+        (write("shape.npz", n_demos=np.array([2, 2])), "one integer"),
+        (write("nan.npz", obs_1=nan), r"demo 1: .*NaN .*step 3"),
+    ]
+
+
+def test_load_rejects_damaged_files_naming_the_file_and_problem(tmp_path):
+    for path, match in _damaged_demo_files(tmp_path):
+        with pytest.raises(ValueError, match=match) as info:
+            load_demos(path)
+        assert path.name in str(info.value), path
+
+
 def test_not_a_sequence_is_rejected():
     with pytest.raises(ValueError, match="expected a sequence"):
         as_demonstrations(Demonstration(np.zeros((5, 2))))
     with pytest.raises(ValueError, match=r"shape \(n_demos, T\+1, d\)"):
         as_demonstrations(np.zeros((5, 2)))
+    with pytest.raises(ValueError, match="pass a list"):
+        as_demonstrations({"observations": np.zeros((5, 2))})
 
 
 def test_piecewise_linear_demos_switch_where_the_direction_changes():
