@@ -226,6 +226,17 @@ def test_bad_fields_are_clear_value_errors(edit, message):
         TaskModel.from_json(json.dumps(data))
 
 
+def test_paths_that_look_like_json_are_read_as_files(tmp_path, monkeypatch):
+    task = TASKS[sorted(TASKS)[0]]()
+    (tmp_path / "[run 1]").mkdir()
+    task.to_json(tmp_path / "[run 1]" / "task.json")
+    monkeypatch.chdir(tmp_path)
+    for source in ("[run 1]/task.json", tmp_path / "[run 1]" / "task.json"):
+        assert TaskModel.from_json(source).to_dict() == task.to_dict()
+    with pytest.raises(ValueError, match="cannot read task model file"):
+        TaskModel.from_json(tmp_path / "{absent}.json")
+
+
 def test_missing_file_is_a_value_error(tmp_path):
     with pytest.raises(ValueError, match="cannot read task model file"):
         TaskModel.from_json(tmp_path / "absent.json")

@@ -665,9 +665,17 @@ class TaskModel:
 
     @classmethod
     def from_json(cls, source: str | os.PathLike) -> TaskModel:
-        """Load from a JSON string or from a path to a JSON file."""
+        """Load from a JSON string or from a path to a JSON file.
+
+        A path-like, or a string naming an existing file, is read as a file; any other string
+        that starts like JSON is parsed as JSON text.
+        """
         text = str(source)
-        if not text.lstrip().startswith(("{", "[")):
+        if (
+            isinstance(source, os.PathLike)
+            or os.path.isfile(text)
+            or not text.lstrip().startswith(("{", "["))
+        ):
             try:
                 with open(source, encoding="utf-8") as fh:
                     text = fh.read()
