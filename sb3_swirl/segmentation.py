@@ -36,6 +36,7 @@ Indicator = Callable[[list[np.ndarray], Any], list[np.ndarray]]
 
 _CHUNK = 100_000  # rows per predict call: bounds peak memory on 1000 x 1000-step demo sets
 _SEED_MAX = np.iinfo(np.int32).max
+_DEFAULT_WINDOW = 3  # of the GMM and velocity indicators
 
 
 # ---------------------------------------------------------------------------- helpers
@@ -95,7 +96,7 @@ def gmm_indicator(
     states: list[np.ndarray],
     random_state: Any = None,
     *,
-    window: int = 3,
+    window: int = _DEFAULT_WINDOW,
     n_components: int = 5,
     max_samples: int = 20_000,
     smooth: int | None = None,
@@ -166,7 +167,7 @@ def velocity_indicator(
     states: list[np.ndarray],
     random_state: Any = None,
     *,
-    window: int = 3,
+    window: int = _DEFAULT_WINDOW,
     angle_threshold: float = math.pi / 4,
     min_speed: float = 0.1,
 ) -> list[np.ndarray]:
@@ -437,8 +438,11 @@ class TransitionStateClustering(BaseEstimator):
         the list of task-space state arrays (T_i + 1, p) and an int seed and returns candidate
         transition steps per demonstration (use ``functools.partial`` of :func:`gmm_indicator`,
         :func:`velocity_indicator` or :func:`linear_indicator` to change their settings).
-    window : int, default 3
-        Window length of the indicators; every demonstration needs ``window + 2`` states.
+    window : int, optional
+        Window length of the indicators (``--window`` in the CLI). By default 3 for ``"gmm"``
+        and ``"velocity"``; ``"linear"`` then uses its own default, ``max(2 (p + 1), 8)``
+        transitions per side (it fits ``p + 1`` coefficients on each). Every demonstration
+        needs ``window + 2`` states (at least 5 by default).
     n_indicator_components : int, default 5
         GMM components of the ``"gmm"`` indicator.
     max_indicator_samples : int, default 20000
@@ -512,7 +516,7 @@ class TransitionStateClustering(BaseEstimator):
     def __init__(
         self,
         indicator: str | Indicator = "gmm",
-        window: int = 3,
+        window: int | None = None,
         n_indicator_components: int = 5,
         max_indicator_samples: int = 20_000,
         kernel: str | None = None,
@@ -563,6 +567,8 @@ class TransitionStateClustering(BaseEstimator):
             "n_regions_max",
         ):
             value = getattr(self, name)
+            if name == "window" and value is None:
+                continue
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         if self.kernel not in (None, "rbf"):
@@ -601,7 +607,7 @@ class TransitionStateClustering(BaseEstimator):
         self
         """
         self._check_params()
-        demos = as_demonstrations(demos, window=self.window)
+        demos = as_demonstrations(demos, window=self._window)
         # The work is many small (p x p) factorisations, where BLAS threads only add
         # synchronisation overhead (4x slower measured on 2 busy cores).
         with threadpool_limits(limits=1, user_api="blas"):
@@ -695,6 +701,11 @@ class TransitionStateClustering(BaseEstimator):
         states = np.asarray(states, dtype=np.float64)
         return states if self.feature_map_ is None else self.feature_map_(states)
 
+    @property
+    def _window(self) -> int:
+        """The window of the ``"gmm"`` and ``"velocity"`` indicators and the length checks."""
+        return _DEFAULT_WINDOW if self.window is None else int(self.window)
+
     def _min_demos(self, n: int) -> int:
         return max(1, math.ceil(self.min_demo_fraction * n - 1e-9))
 
@@ -727,14 +738,14 @@ class TransitionStateClustering(BaseEstimator):
             found = gmm_indicator(
                 x,
                 seed,
-                window=self.window,
+                window=self._window,
                 n_components=self.n_indicator_components,
                 max_samples=self.max_indicator_samples,
             )
         elif self.indicator == "velocity":
-            found = velocity_indicator(x, seed, window=self.window)
+            found = velocity_indicator(x, seed, window=self._window)
         elif self.indicator == "linear":
-            found = linear_indicator(x, seed)
+            found = linear_indicator(x, seed, window=self.window)
         else:
             found = self.indicator(x, seed)
         if not isinstance(found, Sequence) or len(found) != len(x):
@@ -835,6 +846,6 @@ class TransitionStateClustering(BaseEstimator):
         cov = np.cov(points, rowvar=False).reshape(len(mean), len(mean)) if len(points) > 1 else 0
         bounds = None
         if self.use_time:
-            spread = max(float(times.max() - times.min()), float(self.window))
+            spread = max(float(times.max() - times.min()), float(self._window))
             bounds = (max(0.0, float(times.min()) - spread), float(times.max()) + spread)
         return Region(mean, cov + reg, threshold, time_bounds=bounds)

@@ -257,3 +257,15 @@ def test_a_first_region_holding_the_start_state_is_pruned():
     for region, corner in zip(tsc.regions_, corners[1:], strict=True):
         np.testing.assert_allclose(region.mean, corner, atol=0.2)
     assert all(segs[0] > 6 and (segs >= 0).all() for segs in tsc.segments_)
+
+
+def test_linear_indicator_takes_the_window_and_otherwise_its_own_default(three_phases):
+    demos, _ = three_phases
+
+    def transitions(**kwargs):
+        tsc = TransitionStateClustering(indicator="linear", random_state=0, **kwargs)
+        return [t.tolist() for t in tsc.fit(demos).transitions_]
+
+    p = demos[0].observations.shape[1]
+    assert transitions() == transitions(window=max(2 * (p + 1), 8))
+    assert transitions(window=30) != transitions()  # long windows blur the switches
