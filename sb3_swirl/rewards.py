@@ -18,7 +18,11 @@ import numpy as np
 from sklearn.base import BaseEstimator
 
 from sb3_swirl.demos import Demonstration, as_demonstrations
-from sb3_swirl.segmentation import TransitionStateClustering, segment_boundaries
+from sb3_swirl.segmentation import (
+    TransitionStateClustering,
+    is_finite_real,
+    segment_boundaries,
+)
 from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
 
 
@@ -172,8 +176,10 @@ class QuadraticRewardLearner(RewardLearner):
         """
         if self.metric not in ("mahalanobis", "euclidean"):
             raise ValueError(f"metric must be 'mahalanobis' or 'euclidean', got {self.metric!r}")
-        if not self.regularization > 0:
-            raise ValueError(f"regularization must be positive, got {self.regularization!r}")
+        if not (is_finite_real(self.regularization) and self.regularization > 0):
+            raise ValueError(
+                f"regularization must be a finite positive number, got {self.regularization!r}"
+            )
         demos = as_demonstrations(demos)
         segments, regions = segment_states(demos, segmentation, features)
         pooled = np.concatenate([s for seg in segments for s in seg])

@@ -17,6 +17,7 @@ Three indicators are provided (§9.5 of the paper compares them) and any callabl
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -294,6 +295,11 @@ _INDICATORS = {"gmm", "velocity", "linear"}
 
 
 # ---------------------------------------------------------------------------- regions
+def is_finite_real(value: Any) -> bool:
+    """Whether ``value`` is a finite real number (not a bool, string or None)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
 def segment_boundaries(
     states: np.ndarray, regions: Sequence[Region], times: np.ndarray | None = None
 ) -> np.ndarray:
@@ -573,19 +579,23 @@ class TransitionStateClustering(BaseEstimator):
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         if self.kernel not in (None, "rbf"):
             raise ValueError(f"kernel must be None or 'rbf', got {self.kernel!r}")
-        checks = {
-            "kernel_sigma": self.kernel_sigma > 0,
-            "concentration": self.concentration > 0,
-            "min_demo_fraction": 0 < self.min_demo_fraction <= 1,
-            "confidence": 0 < self.confidence < 1,
-            "reg_covar": self.reg_covar > 0,
+
+        def positive(v: float) -> bool:
+            return v > 0
+
+        ranges = {
+            "kernel_sigma": (positive, "> 0"),
+            "concentration": (positive, "> 0"),
+            "min_demo_fraction": (lambda v: 0 < v <= 1, "in (0, 1]"),
+            "confidence": (lambda v: 0 < v < 1, "in (0, 1)"),
+            "reg_covar": (positive, "> 0"),
         }
-        ranges = {"min_demo_fraction": "in (0, 1]", "confidence": "in (0, 1)"}
-        for name, ok in checks.items():
-            if not ok:
-                raise ValueError(
-                    f"{name} must be {ranges.get(name, 'positive')}, got {getattr(self, name)!r}"
-                )
+        for name, (ok, text) in ranges.items():
+            value = getattr(self, name)
+            if not (is_finite_real(value) and ok(value)):
+                raise ValueError(f"{name} must be a finite number {text}, got {value!r}")
+        if not (self.kernel_sigma**2 > 0 and math.isfinite(0.5 / self.kernel_sigma**2)):
+            raise ValueError(f"kernel_sigma is too small: got {self.kernel_sigma!r}")
         if self.covariance_type not in ("diag", "tied", "spherical", "full"):
             raise ValueError(
                 "covariance_type must be 'diag', 'tied', 'spherical' or 'full', "
@@ -659,7 +669,27 @@ class TransitionStateClustering(BaseEstimator):
         self.regions_ = _make_disjoint([regions[i] for i in kept])
         self.region_transitions_ = [members[i] for i in kept]
         self.segments_ = [segment_boundaries(s, self.regions_) for s in x]
+        self._check_complete(self.segments_)
         return self
+
+    def _check_complete(self, segments: list[np.ndarray]) -> None:
+        """Raise unless enough demonstrations reach every region in order (after their start)."""
+        problems = []
+        for n, bounds in enumerate(segments):
+            if bounds[0] == 0:
+                problems.append(f"demo {n} starts inside region 0")
+            elif bounds[-1] < 0:
+                missed = int(np.argmax(bounds < 0))
+                problems.append(f"demo {n} never reaches region {missed}")
+        need = self._min_demos(len(segments))
+        if len(segments) - len(problems) < need:
+            shown = "; ".join(problems[:5]) + ("; ..." if len(problems) > 5 else "")
+            raise ValueError(
+                f"only {len(segments) - len(problems)} of {len(segments)} demonstrations reach "
+                f"the {len(self.regions_)} regions in order, {need} needed ({shown}). Do the "
+                "demonstrations move? Otherwise lower min_demo_fraction or change the "
+                "indicator or window"
+            )
 
     def _prune_unreached(
         self, x: list[np.ndarray], regions: list[Region], ids: list[int]

@@ -89,7 +89,7 @@ def test_bad_inputs_raise_value_error(fitted):
         QuadraticRewardLearner().fit(demos, TransitionStateClustering())
     with pytest.raises(ValueError, match="sequence of Region"):
         QuadraticRewardLearner().fit(demos, [1, 2])
-    with pytest.raises(ValueError, match="regularization must be positive"):
+    with pytest.raises(ValueError, match="regularization must be a finite positive number"):
         QuadraticRewardLearner(regularization=0).fit(demos, [])
 
 

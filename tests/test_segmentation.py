@@ -168,7 +168,7 @@ def test_bad_indicator_output_and_parameters_raise_value_error(three_phases):
         TransitionStateClustering(indicator="hmm").fit(demos)
     with pytest.raises(ValueError, match="window must be a positive integer"):
         TransitionStateClustering(window=0).fit(demos)
-    with pytest.raises(ValueError, match=r"min_demo_fraction must be in \(0, 1\]"):
+    with pytest.raises(ValueError, match=r"min_demo_fraction must be a finite number in \(0, 1\]"):
         TransitionStateClustering(min_demo_fraction=1.5).fit(demos)
     with pytest.raises(ValueError, match="no transition region is shared"):
         TransitionStateClustering(
@@ -269,3 +269,29 @@ def test_linear_indicator_takes_the_window_and_otherwise_its_own_default(three_p
     p = demos[0].observations.shape[1]
     assert transitions() == transitions(window=max(2 * (p + 1), 8))
     assert transitions(window=30) != transitions()  # long windows blur the switches
+
+
+def test_demonstrations_that_do_not_move_are_a_clear_error():
+    rng = np.random.default_rng(0)
+    still = [np.ones((20, 2)) + rng.normal(scale=1e-3, size=(20, 2)) for _ in range(4)]
+    with pytest.raises(ValueError, match=r"demo 0 (starts inside|never reaches).*move"):
+        TransitionStateClustering(random_state=0).fit(still)
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        {"kernel_sigma": None},
+        {"kernel_sigma": 1e-170},
+        {"kernel_sigma": float("inf")},
+        {"concentration": float("inf")},
+        {"confidence": "0.9"},
+        {"reg_covar": float("nan")},
+        {"min_demo_fraction": True},
+    ],
+)
+def test_non_finite_or_non_numeric_parameters_are_value_errors(three_phases, params):
+    demos, _ = three_phases
+    name = next(iter(params))
+    with pytest.raises(ValueError, match=name):
+        TransitionStateClustering(kernel="rbf", **params).fit(demos)
