@@ -3,40 +3,65 @@
 Both work with any SB3 algorithm. They read the step ``infos``: ``"segment"`` (the index after the
 step, from the SWIRL wrapper), ``"task_reward"`` (the env's own reward) and ``"is_success"``. On an
 env without the SWIRL wrapper the step reward *is* the task reward and is used instead, so a
-baseline trained on the raw env is scored the same way.
+baseline trained on the raw env is scored the same way; under ``VecNormalize`` that is the
+original, unnormalised reward. An episode end without ``"is_success"`` counts as a failure.
 """
 
 from __future__ import annotations
 
 import os
 from collections import deque
+from collections.abc import Iterable
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
-from stable_baselines3.common.evaluation import evaluate_policy
-from stable_baselines3.common.vec_env import VecEnv, sync_envs_normalization
+from stable_baselines3.common.vec_env import (
+    VecEnv,
+    VecNormalize,
+    sync_envs_normalization,
+    unwrap_vec_normalize,
+)
 
 from sb3_swirl.dqn import find_task
 
 
+def _original_rewards(env: VecNormalize | None, rewards: np.ndarray) -> np.ndarray:
+    """The rewards of the last step before ``env`` normalised them (``rewards`` without it)."""
+    return rewards if env is None else env.get_original_reward()
+
+
+def _success_rate(episodes: Iterable[dict]) -> float:
+    """Mean success, a missing ``is_success`` counting as False; NaN if no episode reports it."""
+    flags = [e["is_success"] for e in episodes]
+    if all(flag is None for flag in flags):
+        return np.nan
+    return float(np.mean([bool(flag) for flag in flags]))
+
+
 class _EpisodeTracker:
-    """Per-env running sums of the true reward; a summary of each episode when it ends."""
+    """Per-env running sums of the true and the step reward; a summary of each finished episode."""
 
     def __init__(self, n_envs: int) -> None:
         self.returns = np.zeros(n_envs)
+        self.rewards = np.zeros(n_envs)
+        self.lengths = np.zeros(n_envs, dtype=int)
 
     def step(self, i: int, reward: float, done: bool, info: dict[str, Any]) -> dict | None:
         self.returns[i] += float(info.get("task_reward", reward))
+        self.rewards[i] += float(reward)
+        self.lengths[i] += 1
         if not done:
             return None
         summary = {
-            "task_return": self.returns[i],
+            "task_return": float(self.returns[i]),
+            "reward": float(self.rewards[i]),
+            "length": int(self.lengths[i]),
             "segment": info.get("segment"),
             "is_success": info.get("is_success"),
         }
-        self.returns[i] = 0.0
+        self.returns[i] = self.rewards[i] = self.lengths[i] = 0
         return summary
 
 
@@ -48,10 +73,12 @@ class SegmentProgressCallback(BaseCallback):
     * ``swirl/reach_rate_seg{i}``: fraction whose final segment index is above ``i``
       (region ``i`` was reached), for every segment ``i``;
     * ``swirl/final_segment_mean``: mean final segment index;
-    * ``swirl/success_rate``: mean of ``info["is_success"]`` at the episode end;
+    * ``swirl/success_rate``: mean of ``info["is_success"]`` at the episode end (missing:
+      False; not logged when no episode reports it);
     * ``swirl/task_return_mean``: mean undiscounted true return.
 
-    Values are recorded when episodes end and written with SB3's normal log dumps.
+    Values are recorded when episodes end and written with SB3's normal log dumps. Episodes
+    that run on across ``learn(..., reset_num_timesteps=False)`` calls are summed whole.
 
     Parameters
     ----------
@@ -74,6 +101,8 @@ class SegmentProgressCallback(BaseCallback):
         self.n_segments = n_segments
         self.n_episodes = 0
         self._episodes: deque[dict] = deque(maxlen=window_size)
+        self._tracker: _EpisodeTracker | None = None
+        self._final_obs: Any = None  # the model's last observation when training last ended
 
     def _init_callback(self) -> None:
         if self.n_segments is None:
@@ -81,11 +110,20 @@ class SegmentProgressCallback(BaseCallback):
                 self.n_segments = find_task(self.training_env).n_segments
             except ValueError:
                 self.n_segments = 0  # not a SWIRL env: success and return only
-        self._tracker = _EpisodeTracker(self.training_env.num_envs)
+        # learn() resets the env (a new _last_obs) unless it goes on with reset_num_timesteps=False:
+        # then the running episodes go on too
+        n_envs = self.training_env.num_envs
+        going_on = self._final_obs is not None and self.model._last_obs is self._final_obs
+        if self._tracker is None or len(self._tracker.returns) != n_envs or not going_on:
+            self._tracker = _EpisodeTracker(n_envs)
+
+    def _on_training_end(self) -> None:
+        self._final_obs = self.model._last_obs
 
     def _on_step(self) -> bool:
         ended = False
         rewards = self.locals.get("rewards", np.zeros(len(self.locals["dones"])))
+        rewards = _original_rewards(self.model.get_vec_normalize_env(), rewards)
         for i, (done, info) in enumerate(
             zip(self.locals["dones"], self.locals["infos"], strict=True)
         ):
@@ -105,9 +143,9 @@ class SegmentProgressCallback(BaseCallback):
             for i in range(self.n_segments):
                 self.logger.record(f"swirl/reach_rate_seg{i}", float(np.mean(final > i)))
             self.logger.record("swirl/final_segment_mean", float(final.mean()))
-        successes = [e["is_success"] for e in self._episodes if e["is_success"] is not None]
-        if successes:
-            self.logger.record("swirl/success_rate", float(np.mean(successes)))
+        success_rate = _success_rate(self._episodes)
+        if not np.isnan(success_rate):
+            self.logger.record("swirl/success_rate", success_rate)
         self.logger.record(
             "swirl/task_return_mean", float(np.mean([e["task_return"] for e in self._episodes]))
         )
@@ -125,9 +163,15 @@ class TaskEvalCallback(EvalCallback):
     History, one entry per evaluation: ``evaluations_timesteps``, ``evaluations_episodes``
     (training episodes finished so far: the paper's "rollouts"), ``success_rates``,
     ``task_returns``, ``evaluations_results`` / ``evaluations_length`` (proxy returns and
-    lengths per episode) and ``evaluations_task_returns`` / ``evaluations_successes`` per
-    episode. With ``log_path`` it is saved to ``log_path/evaluations.npz`` after every
-    evaluation.
+    lengths per episode), ``evaluations_task_returns`` / ``evaluations_successes`` per
+    episode (``n_eval_episodes`` entries each; an episode end without ``info["is_success"]``
+    is a failure, and the success rate is NaN when no episode reports it) and
+    ``evaluations_final_segments`` (SWIRL envs). With ``log_path`` it is saved to
+    ``log_path/evaluations.npz`` after every evaluation.
+
+    The episodes are counted and scored from the steps of ``eval_env`` (every ``done`` ends
+    one), not by a ``Monitor``, so the order of the wrappers does not matter; rewards are
+    taken before ``VecNormalize``.
 
     Parameters
     ----------
@@ -137,8 +181,8 @@ class TaskEvalCallback(EvalCallback):
     callback_on_new_best, callback_after_eval :
         As in :class:`stable_baselines3.common.callbacks.EvalCallback`.
     warn : bool
-        Warn when ``eval_env`` has no ``Monitor``; off by default because the scores here come
-        from ``info``, not from a monitor.
+        Accepted for compatibility with ``EvalCallback``; unused, since no ``Monitor`` is
+        needed.
 
     Examples
     --------
@@ -182,50 +226,65 @@ class TaskEvalCallback(EvalCallback):
         self.evaluations_task_returns: list[list[float]] = []
         self.evaluations_final_segments: list[list[int]] = []
 
-    def _log_success_callback(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
-        summary = self._eval_tracker.step(
-            locals_["i"], locals_["reward"], bool(locals_["done"]), locals_["info"]
-        )
-        if summary is not None:
-            if summary["is_success"] is not None:
-                self._is_success_buffer.append(bool(summary["is_success"]))
-            self._task_returns.append(float(summary["task_return"]))
-            if summary["segment"] is not None:
-                self._final_segments.append(int(summary["segment"]))
+    def _evaluate(self) -> list[dict]:
+        """Summaries of ``n_eval_episodes`` episodes, split over the sub-envs as SB3 does."""
+        env, n_envs = self.eval_env, self.eval_env.num_envs
+        targets = np.array([(self.n_eval_episodes + i) // n_envs for i in range(n_envs)])
+        counts = np.zeros(n_envs, dtype=int)
+        tracker = _EpisodeTracker(n_envs)
+        vec_normalize = unwrap_vec_normalize(env)
+        episodes: list[dict] = []
+        obs, states, episode_starts = env.reset(), None, np.ones(n_envs, dtype=bool)
+        while (counts < targets).any():
+            actions, states = self.model.predict(
+                obs,  # type: ignore[arg-type]
+                state=states,
+                episode_start=episode_starts,
+                deterministic=self.deterministic,
+            )
+            obs, rewards, episode_starts, infos = env.step(actions)
+            rewards = _original_rewards(vec_normalize, rewards)
+            for i in np.flatnonzero(counts < targets):
+                summary = tracker.step(i, rewards[i], bool(episode_starts[i]), infos[i])
+                if summary is not None:
+                    episodes.append(summary)
+                    counts[i] += 1
+            if self.render:
+                env.render()
+        return episodes
 
     def _on_step(self) -> bool:
         self.n_training_episodes += int(np.sum(self.locals["dones"]))
         if not (self.eval_freq > 0 and self.n_calls % self.eval_freq == 0):
             return True
+        return self.evaluate()
+
+    def evaluate(self) -> bool:
+        """Evaluate the model now and record it, as every ``eval_freq`` calls.
+
+        Call it after ``learn`` to score the final policy when the budget is not a multiple of
+        ``eval_freq``. Returns whether training should go on (``callback_on_new_best``).
+        """
         if self.model.get_vec_normalize_env() is not None:
             sync_envs_normalization(self.training_env, self.eval_env)
 
-        self._is_success_buffer, self._task_returns, self._final_segments = [], [], []
-        self._eval_tracker = _EpisodeTracker(self.eval_env.num_envs)
-        episode_rewards, episode_lengths = evaluate_policy(
-            self.model,
-            self.eval_env,
-            n_eval_episodes=self.n_eval_episodes,
-            render=self.render,
-            deterministic=self.deterministic,
-            return_episode_rewards=True,
-            warn=self.warn,
-            callback=self._log_success_callback,
-        )
-        # NaN, not 0, when the env reports no success at all
-        success_rate = (
-            float(np.mean(self._is_success_buffer)) if self._is_success_buffer else np.nan
-        )
-        task_return = float(np.mean(self._task_returns))
+        episodes = self._evaluate()
+        episode_rewards = [e["reward"] for e in episodes]
+        episode_lengths = [e["length"] for e in episodes]
+        successes = [bool(e["is_success"]) for e in episodes]
+        task_returns = [e["task_return"] for e in episodes]
+        final_segments = [int(e["segment"]) for e in episodes if e["segment"] is not None]
+        success_rate = _success_rate(episodes)
+        task_return = float(np.mean(task_returns))
         self.last_mean_reward = float(np.mean(episode_rewards))
 
         self.evaluations_timesteps.append(self.num_timesteps)
         self.evaluations_episodes.append(self.n_training_episodes)
-        self.evaluations_results.append(list(episode_rewards))  # type: ignore[arg-type]
-        self.evaluations_length.append(list(episode_lengths))  # type: ignore[arg-type]
-        self.evaluations_successes.append(self._is_success_buffer)
-        self.evaluations_task_returns.append(self._task_returns)
-        self.evaluations_final_segments.append(self._final_segments)
+        self.evaluations_results.append(episode_rewards)
+        self.evaluations_length.append(episode_lengths)
+        self.evaluations_successes.append(successes)
+        self.evaluations_task_returns.append(task_returns)
+        self.evaluations_final_segments.append(final_segments)
         self.success_rates.append(success_rate)
         self.task_returns.append(task_return)
         if self.log_path is not None:
@@ -250,8 +309,8 @@ class TaskEvalCallback(EvalCallback):
         self.logger.record("eval/mean_ep_length", float(np.mean(episode_lengths)))
         self.logger.record("eval/success_rate", success_rate)
         self.logger.record("eval/task_return", task_return)
-        if self._final_segments:
-            self.logger.record("eval/final_segment_mean", float(np.mean(self._final_segments)))
+        if final_segments:
+            self.logger.record("eval/final_segment_mean", float(np.mean(final_segments)))
         self.logger.record("eval/training_episodes", self.n_training_episodes)
         self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
         self.logger.dump(self.num_timesteps)

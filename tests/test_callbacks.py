@@ -8,11 +8,14 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from stable_baselines3 import DQN, PPO
+from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import configure
-from test_dqn import PointEnv, point_demos, point_env
+from stable_baselines3.common.vec_env import VecNormalize
+from test_dqn import PointEnv, point_demos, point_env, point_task
 
 from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
 from sb3_swirl.dqn import SwirlDQN
+from swirl_wrappers import SwirlWrapper
 
 
 def logged(path) -> dict[str, list[str]]:
@@ -107,3 +110,102 @@ def test_plain_env_is_scored_on_its_own_reward(tmp_path):
     log = logged(tmp_path)
     assert "swirl/final_segment_mean" not in log
     assert log["swirl/success_rate"]
+
+
+def scripted(model: DQN) -> DQN:
+    """Evaluate ``model`` with the demos' route on PointEnv: right until x ~ 1, then up."""
+    model.predict = lambda obs, state=None, episode_start=None, deterministic=False: (
+        np.where(obs[:, 0] < 0.95, 0, 2),
+        None,
+    )
+    return model
+
+
+def test_segment_progress_logs_the_true_return_under_vec_normalize(tmp_path):
+    """On a plain env the step reward is the task reward, but VecNormalize scales it."""
+    env = VecNormalize(make_vec_env("CartPole-v1", n_envs=2, seed=0))
+    model = DQN("MlpPolicy", env, learning_starts=1000, seed=0)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    callback = SegmentProgressCallback()
+    model.learn(300, callback=callback, log_interval=1)
+    monitor = [episode["r"] for episode in model.ep_info_buffer]
+    assert callback.n_episodes == len(monitor) > 5
+    assert float(logged(tmp_path)["swirl/task_return_mean"][-1]) == pytest.approx(np.mean(monitor))
+
+
+def test_segment_progress_keeps_episodes_that_go_on_across_learn_calls(tmp_path):
+    model = DQN("MlpPolicy", make_vec_env("CartPole-v1", n_envs=1, seed=0), seed=0)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    callback = SegmentProgressCallback(window_size=1)  # logs each episode's own return
+    model.learn(10, callback=callback, log_interval=1)
+    assert callback.n_episodes == 0  # stopped mid-episode
+    model.learn(150, callback=callback, log_interval=1, reset_num_timesteps=False)
+    went_on = [episode["r"] for episode in model.ep_info_buffer]
+    model.learn(150, callback=callback, log_interval=1)  # resets the env: a fresh start
+    restarted = [episode["r"] for episode in model.ep_info_buffer]
+    returns = [float(r) for r in logged(tmp_path)["swirl/task_return_mean"]]
+    assert returns == went_on + restarted
+
+
+class NoTermPoint(PointEnv):
+    """Never terminates: completion or the time limit ends the episode; 300 steps at most."""
+
+    steps = 0
+
+    def step(self, action):
+        self.steps += 1
+        if self.steps > 300:
+            raise RuntimeError("the evaluation does not stop")
+        obs, reward, _, truncated, info = super().step(action)
+        return obs, reward, False, truncated, info
+
+
+def test_task_eval_counts_episodes_ended_by_completion_under_an_inner_monitor():
+    """make_vec_env(..., wrapper_class=SwirlWrapper) puts the Monitor inside the SWIRL wrapper:
+    an episode ended by completion carries no ``info["episode"]``."""
+    kwargs = dict(wrapper_class=SwirlWrapper, seed=0)
+    kwargs["wrapper_kwargs"] = dict(task=point_task(), terminate_on_completion=True)
+    env = make_vec_env(lambda: gym.wrappers.TimeLimit(NoTermPoint(), 60), **kwargs)
+    eval_env = make_vec_env(lambda: gym.wrappers.TimeLimit(NoTermPoint(), 60), **kwargs)
+    model = scripted(DQN("MlpPolicy", env, learning_starts=1000, seed=0))
+    callback = TaskEvalCallback(eval_env, n_eval_episodes=5, eval_freq=10, verbose=0)
+    model.learn(10, callback=callback)
+    assert callback.success_rates == [1.0]
+    assert len(callback.evaluations_results[0]) == 5
+    assert all(length < 60 for length in callback.evaluations_length[0])  # ended on completion
+
+
+class SuccessOnlyAtGoal(PointEnv):
+    """Reports ``is_success`` only when it succeeds; every other episode starts too far away."""
+
+    episodes = 0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.pos = np.zeros(2) if self.episodes % 2 == 0 else np.full(2, -0.5)
+        self.episodes += 1
+        return self.pos.astype(np.float32), {}
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = super().step(action)
+        if not terminated:
+            del info["is_success"]
+        return obs, reward, terminated, truncated, info
+
+
+def test_task_eval_counts_a_missing_is_success_as_a_failure(tmp_path):
+    model = scripted(DQN("MlpPolicy", gym.wrappers.TimeLimit(PointEnv(), 21), seed=0))
+    callback = TaskEvalCallback(
+        gym.wrappers.TimeLimit(SuccessOnlyAtGoal(), 21),
+        n_eval_episodes=4,
+        eval_freq=10,
+        log_path=str(tmp_path),
+        verbose=0,
+    )
+    model.learn(20, callback=callback)
+    # the near starts reach the goal in 19 steps, the far ones would need 30
+    assert callback.success_rates == [0.5, 0.5]
+    assert callback.task_returns == [0.5, 0.5]
+    saved = np.load(tmp_path / "evaluations.npz")
+    for key in ("results", "ep_lengths", "successes", "task_returns"):
+        assert saved[key].shape == (2, 4), key
