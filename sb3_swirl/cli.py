@@ -179,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, OSError) as exc:  # OSError: a path that is a folder, unwritable...
         # soft_wrap: never break a path a user may copy; escape: paths may contain [brackets]
         console.print(f"[bold red]error:[/] {escape(str(exc))}", soft_wrap=True)
         return 2

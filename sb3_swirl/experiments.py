@@ -109,6 +109,11 @@ def rollouts_to_success(curve: list[dict[str, float]], target: float) -> int | N
     return None
 
 
+def _check_count(value: Any, name: str, minimum: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+
+
 def train_and_evaluate(
     algo: str,
     preset: Preset,
@@ -130,6 +135,7 @@ def train_and_evaluate(
     from sb3_swirl.dqn import SwirlDQN
     from swirl_wrappers import SwirlWrapper
 
+    _check_count(total_timesteps, "total_timesteps", 1)
     hyperparams = load_hyperparams(algo, preset.env_id)
     kwargs = _algo_kwargs(hyperparams)
     policy = hyperparams.get("policy", "MlpPolicy")
@@ -156,6 +162,8 @@ def train_and_evaluate(
     start = time.perf_counter()
     model.learn(total_timesteps=total_timesteps, callback=callback, progress_bar=progress)
     wall = time.perf_counter() - start
+    if callback.evaluations_timesteps[-1:] != [model.num_timesteps]:
+        callback.evaluate()  # the final policy, when the budget is not a multiple of eval_freq
     curve = [
         {
             "timesteps": int(t),
@@ -246,6 +254,8 @@ def run_demo(
     preset = PRESETS[name]
     n_demos = preset.n_demos if n_demos is None else n_demos
     steps = preset.total_timesteps if total_timesteps is None else total_timesteps
+    _check_count(n_demos, "n_demos", 2)
+    _check_count(steps, "total_timesteps", 1)
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
 

@@ -67,6 +67,16 @@ def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
     assert "schema version" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "2"])  # -o is required
+    # an output path that is a folder, and budgets that cannot run, before any work
+    demos = tmp_path / "demos.npz"
+    assert main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "2", "-o", str(demos), "-q"]) == 0
+    assert main(["fit", str(demos), "-o", str(tmp_path)]) == 2
+    assert "directory" in capsys.readouterr().err
+    for option, value in (("--timesteps", "-5"), ("--n-demos", "1")):
+        out = tmp_path / option
+        assert main(["demo", "parking", option, value, "--out", str(out), "-q"]) == 2
+        assert option[2:].replace("-", "_") in capsys.readouterr().err
+        assert not out.exists()
 
 
 def test_every_preset_has_tuned_hyperparameters_for_both_methods():
@@ -103,3 +113,17 @@ def test_main_job_writes_its_results(tmp_path):
     for name in ("learning_curve.png", "segments.png", "task.json"):
         assert (out / name).stat().st_size > 0
     assert TaskModel.from_json(out / "task.json").n_segments == results["n_segments"]
+
+
+def test_train_and_evaluate_scores_the_final_policy_and_checks_the_budget():
+    from sb3_swirl.experiments import PRESETS, train_and_evaluate
+
+    preset = PRESETS["parking"]
+    steps = preset.eval_freq + preset.eval_freq // 5  # not a multiple of eval_freq
+    run = train_and_evaluate("dqn", preset, total_timesteps=steps, seed=0, progress=False)
+    # the last evaluation scores the policy at the end of training
+    assert run["curve"][0]["timesteps"] == preset.eval_freq
+    assert run["curve"][-1]["timesteps"] >= steps
+    assert run["final_success"] == run["curve"][-1]["success_rate"]
+    with pytest.raises(ValueError, match="total_timesteps"):
+        train_and_evaluate("dqn", preset, total_timesteps=0, seed=0, progress=False)
