@@ -21,6 +21,7 @@ from torch.nn import functional as F
 
 from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.features import RBFFeaturesExtractor
+from sb3_swirl.segmentation import is_finite_real
 from sb3_swirl.vec_env import SwirlVecEnv
 from swirl_wrappers import SegmentTracker, SwirlWrapper, TaskModel
 
@@ -64,12 +65,36 @@ def swirl_settings(env: VecEnv) -> dict[str, Any]:
             }
         venv = venv.venv
     names = ("task", "terminate_on_completion", *_REWARD_SETTINGS)
-    try:
+    # has_attr first: a get_attr that fails inside a SubprocVecEnv worker kills the worker
+    settings = {}
+    if venv.has_attr("task"):
         settings = {name: venv.get_attr(name, indices=[0])[0] for name in names}
-    except AttributeError:
-        settings = {}
     if not isinstance(settings.get("task"), TaskModel):
         raise ValueError(f"the environment carries no SWIRL proxy task: {_WRAP_HINT}")
+    return settings
+
+
+def _inverse_dynamics_settings(kwargs: dict[str, Any] | None) -> dict[str, Any]:
+    """``inverse_dynamics_kwargs`` over their defaults, checked."""
+    settings = {"net_arch": [64, 64], "epochs": 50, "lr": 1e-3, "batch_size": 256}
+    unknown = set(kwargs or {}) - set(settings)
+    if unknown:
+        raise ValueError(f"unknown inverse_dynamics_kwargs {sorted(unknown)}; use {list(settings)}")
+    settings.update(kwargs or {})
+
+    def count(value: Any) -> bool:
+        return isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 1
+
+    arch = settings["net_arch"]
+    if not (isinstance(arch, list | tuple) and all(count(width) for width in arch)):
+        raise ValueError(f"inverse_dynamics_kwargs net_arch must be a list of widths, got {arch!r}")
+    for name in ("epochs", "batch_size"):
+        if not count(settings[name]):
+            raise ValueError(
+                f"inverse_dynamics_kwargs {name} must be an integer >= 1, got {settings[name]!r}"
+            )
+    if not (is_finite_real(settings["lr"]) and settings["lr"] > 0):
+        raise ValueError(f"inverse_dynamics_kwargs lr must be > 0, got {settings['lr']!r}")
     return settings
 
 
@@ -274,6 +299,23 @@ class SwirlDQN(DQN):
         ):
             if int(value) < (0 if name == "bc_epochs" else 1):
                 raise ValueError(f"{name} must be a positive integer, got {value}")
+        for name, value, low in (
+            ("bc_lr", bc_lr, 0.0),
+            ("bc_margin", bc_margin, None),
+            ("bc_td_coef", bc_td_coef, None),
+            ("demo_loss_coef", demo_loss_coef, None),
+        ):
+            if not (is_finite_real(value) and (value > low if low is not None else value >= 0)):
+                sign = "> 0" if low is not None else ">= 0"
+                raise ValueError(f"{name} must be a finite number {sign}, got {value!r}")
+        _inverse_dynamics_settings(inverse_dynamics_kwargs)  # fail now, not after the steps
+        n_step = max(int(n_steps), int(dict(replay_buffer_kwargs or {}).get("n_steps", 1)))
+        if prefill_replay and (n_step > 1 or optimize_memory_usage):
+            raise ValueError(
+                "prefill_replay needs a plain 1-step replay buffer: the demo transitions do not "
+                "follow the buffer's env columns, which n-step returns and "
+                "optimize_memory_usage read across rows (set prefill_replay=False)"
+            )
         super().__init__(
             policy,
             env,  # type: ignore[arg-type]
@@ -364,6 +406,20 @@ class SwirlDQN(DQN):
             self._demo = self._demo_tensors(self._demo_data)
             self._demo_gen = self._rng(3)
 
+    def set_env(self, env: Any, force_reset: bool = True) -> None:
+        """:meth:`stable_baselines3.DQN.set_env`, refusing an env with a different proxy task.
+
+        The demonstrations are lifted and the Q-network was trained with ``model.task``; an
+        env that segments or rewards by another task would silently train on a different
+        problem.
+        """
+        super().set_env(env, force_reset)
+        if self.task_json is not None and find_task(self.env).to_json() != self.task_json:
+            raise ValueError(
+                "the new environment's proxy task differs from the one this model was built "
+                "with (model.task); wrap the env with model.task, or start a new model"
+            )
+
     def _setup_learn(self, *args: Any, **kwargs: Any) -> tuple[int, Any]:
         result = super()._setup_learn(*args, **kwargs)
         if not self._bc_done and self.demonstrations:
@@ -406,7 +462,8 @@ class SwirlDQN(DQN):
             if states.shape[1] != state_dim:
                 raise ValueError(
                     f"demonstration {n}: observations have {states.shape[1]} dims, the "
-                    f"environment's (unlifted) observations have {state_dim}"
+                    f"environment's (unlifted) observations have {state_dim} (demos must be "
+                    "states of the env under the SWIRL wrapper; frame stacking is not supported)"
                 )
             tracker = SegmentTracker(
                 task,
@@ -488,11 +545,7 @@ class SwirlDQN(DQN):
         -------
         list of int arrays of shape (T,)
         """
-        kw = {"net_arch": [64, 64], "epochs": 50, "lr": 1e-3, "batch_size": 256}
-        unknown = set(self.inverse_dynamics_kwargs) - set(kw)
-        if unknown:
-            raise ValueError(f"unknown inverse_dynamics_kwargs {sorted(unknown)}; use {list(kw)}")
-        kw.update(self.inverse_dynamics_kwargs)
+        kw = _inverse_dynamics_settings(self.inverse_dynamics_kwargs)
         assert self.task is not None
         state_dim = self.observation_space.shape[0] - self.task.n_indices  # type: ignore[index]
         n_actions = int(self.action_space.n)  # type: ignore[attr-defined]
@@ -580,6 +633,11 @@ class SwirlDQN(DQN):
             )
             return {"loss": float("nan"), "accuracy": float("nan"), "n_pairs": 0}
         data = {k: np.concatenate([d[k] for d in lifted]) for k in lifted[0] if k != "state"}
+        vec_norm = self._vec_normalize_env
+        if vec_norm is not None and vec_norm.training and vec_norm.norm_obs:
+            # else BC fits inputs normalised by the statistics of a reset or two, which the
+            # first rollouts then move far away
+            vec_norm.obs_rms.update(data["obs"])
         self._demo_data = data
         self._demo = self._demo_tensors(data)
         self._demo_gen = self._rng(3)
@@ -712,9 +770,11 @@ class SwirlDQN(DQN):
             )
 
     def _excluded_save_params(self) -> list[str]:
+        # Before BC the demonstrations are saved (a loaded model still starts with BC); after
+        # it, the lifted demo pairs (_demo_data) are.
         return [
             *super()._excluded_save_params(),
-            "demonstrations",
+            *(["demonstrations"] if self._bc_done else []),
             "task",
             "inverse_dynamics_",
             "_demo",

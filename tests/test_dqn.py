@@ -111,6 +111,58 @@ def test_task_is_found_in_sub_envs_and_must_match():
         SwirlDQN("MlpPolicy", venv, task=other)
 
 
+def test_set_env_refuses_a_different_task():
+    model = SwirlDQN("MlpPolicy", point_env(), seed=0)
+    model.set_env(point_env())  # the same task: fine
+    moved = TaskModel(
+        regions=[Region(mean=[0.5, 0.0], covariance=np.eye(2) * 0.01, threshold=1.0)] * 2,
+        rewards=[QuadraticReward(target=[0.5, 0.0], weight=np.eye(2))] * 2,
+    )
+    with pytest.raises(ValueError, match="differs"):
+        model.set_env(SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 60), moved))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (dict(bc_lr=-1.0), "bc_lr"),
+        (dict(demo_loss_coef=float("nan")), "demo_loss_coef"),
+        (dict(inverse_dynamics_kwargs={"batch_size": 0}), "batch_size"),
+        (dict(inverse_dynamics_kwargs={"net_arch": 64}), "net_arch"),
+        (dict(inverse_dynamics_kwargs={"lr": -1}), "lr"),
+        (dict(inverse_dynamics_kwargs={"layers": [8]}), "unknown"),
+        (dict(prefill_replay=True, n_steps=3), "prefill_replay"),
+        (dict(prefill_replay=True, optimize_memory_usage=True, replay_buffer_kwargs={}), "1-step"),
+    ],
+)
+def test_bad_settings_fail_at_construction(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        SwirlDQN("MlpPolicy", point_env(), demonstrations=point_demos(2), **kwargs)
+
+
+def test_a_model_saved_before_learning_keeps_its_demonstrations(tmp_path):
+    model = SwirlDQN("MlpPolicy", point_env(), demonstrations=point_demos(2), bc_epochs=2, seed=0)
+    model.save(tmp_path / "fresh.zip")
+    loaded = SwirlDQN.load(tmp_path / "fresh.zip", env=point_env())
+    loaded.learn(10)
+    assert loaded._bc_done and loaded.bc_n_pairs_ > 0
+
+
+def test_bc_under_vec_normalize_updates_the_statistics_with_the_demo_states():
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    venv = VecNormalize(DummyVecEnv([point_env]), norm_reward=False)
+    model = SwirlDQN("MlpPolicy", venv, demonstrations=point_demos(3), bc_epochs=30, seed=0)
+    model.learn(1)
+    demo_obs = model._demo_data["obs"]
+    assert venv.obs_rms.count > len(demo_obs)  # the demo states went into the statistics
+    # and the cloned policy survives the statistics of the first rollouts
+    with th.no_grad():
+        q = model.q_net(th.as_tensor(venv.normalize_obs(demo_obs), dtype=th.float32))
+    accuracy = float((q.argmax(dim=1).numpy() == model._demo_data["actions"]).mean())
+    assert accuracy >= 0.9
+
+
 def test_bad_demo_shape_is_named():
     demo = Demonstration(np.zeros((5, 3)), np.zeros(4, dtype=int))
     model = SwirlDQN("MlpPolicy", point_env(), demonstrations=[demo, demo], seed=0)
@@ -334,3 +386,16 @@ def test_rbf_q_function_inside_swirl_dqn():
     assert model.q_net.features_extractor.n_indices == 3
     assert model.q_net.features_dim == 81 * 3
     assert model.pretrain()["accuracy"] >= 0.9
+
+
+def test_a_plain_subprocess_env_is_a_clear_error_not_a_dead_worker():
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    venv = make_vec_env("CartPole-v1", n_envs=2, vec_env_cls=SubprocVecEnv)
+    try:
+        with pytest.raises(ValueError, match="carries no SWIRL proxy task"):
+            SwirlDQN("MlpPolicy", venv)
+        assert venv.get_attr("spec")[0].id == "CartPole-v1"  # the workers are still alive
+    finally:
+        venv.close()
