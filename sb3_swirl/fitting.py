@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import inspect
 from collections.abc import Callable
 from typing import Any
@@ -26,9 +27,16 @@ def _jsonable(value: Any) -> Any:
         return value.item()
     if isinstance(value, list | tuple):
         return [_jsonable(v) for v in value]
+    if isinstance(value, functools.partial):
+        return {
+            "partial": _jsonable(value.func),
+            "args": _jsonable(list(value.args)),
+            "kwargs": {k: _jsonable(v) for k, v in value.keywords.items()},
+        }
     if callable(value):
-        func = getattr(value, "func", value)  # functools.partial
-        return f"{getattr(func, '__module__', '?')}.{getattr(func, '__qualname__', repr(func))}"
+        return f"{getattr(value, '__module__', '?')}.{getattr(value, '__qualname__', repr(value))}"
+    if isinstance(value, np.random.RandomState | np.random.Generator):
+        return f"<{type(value).__name__}>"  # its state is not recorded (a repr has an address)
     return repr(value)
 
 
@@ -147,7 +155,10 @@ def fit_task(
             "the angle features (use () for none)"
         )
     if dims is not None:
-        dims = tuple(int(d) for d in np.atleast_1d(dims))
+        index = np.atleast_1d(dims)
+        if index.size and index.dtype.kind not in "iu":
+            raise ValueError(f"dims must be integer indices, got {dims!r}")
+        dims = tuple(int(d) for d in index)
         if (
             (not dims and angles is None)
             or min(dims, default=0) < 0

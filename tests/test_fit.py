@@ -209,3 +209,34 @@ def test_bad_angles_are_clear_value_errors(angular_demos):
         fit_task(angular_demos, angles=[[2]], dims=[1])
     with pytest.raises(ValueError, match="angles must be a sequence"):
         fit_task(angular_demos, angles=[["x"]], dims=[1])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (dict(dims=[0.7, 1.9]), "integer indices"),
+        (dict(dims="01"), "integer indices"),
+        (dict(angles=[[0.9]], dims=[]), "sequences of ints"),
+        (dict(angles="01", dims=[]), "sequences of ints"),
+    ],
+)
+def test_non_integer_indices_are_refused_not_truncated(demos, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        fit_task(demos, random_state=0, **kwargs)
+
+
+def test_metadata_is_the_same_for_the_same_fit(demos):
+    import functools
+
+    from sb3_swirl.segmentation import gmm_indicator
+
+    def fit():
+        indicator = functools.partial(gmm_indicator, window=4)
+        return fit_task(
+            demos, random_state=np.random.RandomState(0), segmentation={"indicator": indicator}
+        )
+
+    first, second = fit(), fit()
+    assert first.to_json() == second.to_json()
+    recorded = first.metadata["segmentation"]["params"]["indicator"]
+    assert recorded["kwargs"] == {"window": 4}

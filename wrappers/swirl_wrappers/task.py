@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import json
+import operator
 import os
 from dataclasses import dataclass, field
 from typing import Any
@@ -47,7 +48,9 @@ def check_angles(angles: Any) -> tuple[tuple[int, ...], ...] | None:
     if angles is None:
         return None
     try:
-        out = tuple(tuple(int(i) for i in angle) for angle in angles)
+        if isinstance(angles, str) or any(isinstance(angle, str) for angle in angles):
+            raise TypeError("strings are not index sequences")
+        out = tuple(tuple(operator.index(i) for i in angle) for angle in angles)
     except (TypeError, ValueError) as exc:
         raise ValueError(
             f"TaskModel.angles must be a sequence of sequences of ints, got {angles!r}"
@@ -377,7 +380,9 @@ class TaskModel:
                     f"segment {i}: region/reward dimension differs from task-space dimension {p}"
                 )
         try:
-            dims = None if self.dims is None else tuple(int(d) for d in self.dims)
+            if isinstance(self.dims, str):
+                raise TypeError("a string is not a sequence of indices")
+            dims = None if self.dims is None else tuple(operator.index(d) for d in self.dims)
         except (TypeError, ValueError) as exc:
             raise ValueError(
                 f"TaskModel.dims must be a sequence of ints, got {self.dims!r}"
