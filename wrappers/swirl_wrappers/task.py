@@ -536,28 +536,39 @@ class TaskModel:
         return reward, index
 
     def reward_and_next_batch(
-        self, obs: np.ndarray, t: np.ndarray | float | None, index: np.ndarray
+        self,
+        obs: np.ndarray,
+        t: np.ndarray | float | None,
+        index: np.ndarray,
+        buffer: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Vectorised :meth:`reward_and_next` for ``n`` states of shape (n, obs_dim).
 
         ``index`` has shape (n,) and ``t`` is ``None``, a scalar or shape (n,). Returns float64
         rewards (n,) and int64 next indices (n,). Unchecked, like :meth:`reward_and_next`.
+        ``buffer``, from :meth:`input_buffer`, is reused for the inputs of the product instead
+        of a new array (the vector wrappers call this on every step).
         """
         tb = self._tables
         n, m = len(index), self.n_indices
-        # Project onto every index's factors in one product, then keep each row's own index:
-        # row index * m + index of the (n * m, 2p) reshape. `take` costs a fraction of 2-D
-        # fancy indexing, and the wrappers call this on every vector step.
-        z = self._task_input(obs).dot(tb.factors_t).reshape(n * m, -1)
+        # One product projects onto every index's factors, offsets included (the inputs end
+        # in a column of ones); then each row keeps its own index: row index * m + index of the
+        # (n * m, 2p) reshape. `take` costs a fraction of 2-D fancy indexing.
+        inputs = self.input_buffer(n) if buffer is None else buffer[:n]
+        inputs[:, :-1] = self._task_input(obs)
+        z = inputs.dot(tb.weights).reshape(n * m, -1)
         z = z.take(index + _row_starts(n, m), axis=0)
-        z -= tb.offsets.take(index, axis=0)
         z *= z
         # (2, n): contiguous rows, which compare and return several times faster than columns.
         q = tb.halves.dot(z.T)
-        inside = q[1] <= 1.0
+        inside = q[1] <= _ones(n)  # an array: a scalar operand costs a conversion per call
         if tb.timed and t is not None:
             inside &= (t >= tb.t_lo_array[index]) & (t <= tb.t_hi_array[index])
         return q[0], index + inside
+
+    def input_buffer(self, n: int) -> np.ndarray:
+        """A buffer for ``n`` rows of :meth:`reward_and_next_batch`'s inputs (ones at the end)."""
+        return np.ones((n, self._tables.weights.shape[0]))
 
     def next_segment(
         self, obs: np.ndarray, t: np.ndarray | float | None, index: np.ndarray | int
@@ -703,6 +714,14 @@ def _row_starts(n: int, m: int) -> np.ndarray:
     return starts
 
 
+@functools.lru_cache(maxsize=16)
+def _ones(n: int) -> np.ndarray:
+    """``n`` ones, read-only: cached like :func:`_row_starts`."""
+    ones = np.ones(n)
+    ones.flags.writeable = False
+    return ones
+
+
 @dataclass(frozen=True)
 class _Tables:
     """Every segment's reward and region folded into one affine map, evaluated per step.
@@ -724,6 +743,7 @@ class _Tables:
     n_trig: int
     factors_t: np.ndarray
     offsets: np.ndarray
+    weights: np.ndarray
     halves: np.ndarray
     factor_list: list[np.ndarray]
     offset_list: list[np.ndarray]
@@ -776,6 +796,7 @@ class _Tables:
                 offsets[i, b * p : (b + 1) * p] = factor @ centre
         offsets[k, p] = -2.0
         halves = np.kron(np.diag([-1.0, 1.0]), np.ones(p))  # R_i(x), distance
+        factors_t = np.ascontiguousarray(factors.reshape(-1, factors.shape[-1]).T)
         bounds = [r.time_bounds or (-np.inf, np.inf) for r in task.regions]
         t_lo = [b[0] for b in bounds] + [-np.inf]
         t_hi = [b[1] for b in bounds] + [np.inf]
@@ -786,8 +807,10 @@ class _Tables:
             lift=lift,
             lift_shift=lift_shift,
             n_trig=n_trig,
-            factors_t=np.ascontiguousarray(factors.reshape(-1, factors.shape[-1]).T),
+            factors_t=factors_t,
             offsets=offsets,
+            # [x, 1] @ weights = factors @ x - offsets, for every index at once
+            weights=np.vstack([factors_t, -offsets.reshape(1, -1)]),
             halves=halves,
             factor_list=[np.ascontiguousarray(f) for f in factors],
             offset_list=list(offsets),

@@ -447,6 +447,9 @@ class SegmentTracker:
         self._start = np.zeros(self.num_envs, dtype=np.int64)
         self._timed = task.timed
         self._zeros = np.zeros(self.num_envs, dtype=np.int64)
+        # Inputs of the task's product, reused every step (a restart step evaluates up to
+        # 2 num_envs rows: the transitions, then the new episodes' first states).
+        self._inputs = task.input_buffer(2 * self.num_envs)
 
     @property
     def t(self) -> np.ndarray:
@@ -468,7 +471,9 @@ class SegmentTracker:
         # New arrays, not in-place writes: earlier infos may hold the old ones.
         self.index = self.index.copy()
         self._start[mask] = self._clock
-        reward, self.index[mask] = self.task.reward_and_next_batch(states[mask], zeros, zeros)
+        reward, self.index[mask] = self.task.reward_and_next_batch(
+            states[mask], zeros, zeros, self._inputs
+        )
         self.ended_index = self.index
         if self.reward_mode == "potential":
             self.potential = self.potential.copy()
@@ -515,7 +520,7 @@ class SegmentTracker:
         t = self.t if self._timed else None
         # count_nonzero: a fraction of the cost of ndarray.any() on small arrays.
         if restart is None or not np.count_nonzero(restart):
-            reward, self.index = self.task.reward_and_next_batch(states, t, before)
+            reward, self.index = self.task.reward_and_next_batch(states, t, before, self._inputs)
             self.ended_index = self.index
             return self._shape(reward, before, self.index, states, task_rewards, terminated)
         rows = restart.nonzero()[0]
@@ -526,7 +531,7 @@ class SegmentTracker:
             index[rows] = 0
             self._start[rows] = self._clock
             reward, self.index = self.task.reward_and_next_batch(
-                states, self.t if self._timed else None, index
+                states, self.t if self._timed else None, index, self._inputs
             )
             # A restart row made no transition: its potential restarts from Phi(s_0).
             not_terminal = None
@@ -543,7 +548,9 @@ class SegmentTracker:
         x[rows] = final_states
         if self._timed:
             t = np.concatenate((t, zeros))
-        reward, nxt = self.task.reward_and_next_batch(x, t, np.concatenate((before, zeros)))
+        reward, nxt = self.task.reward_and_next_batch(
+            x, t, np.concatenate((before, zeros)), self._inputs
+        )
         self.ended_index = nxt[:n]
         self.index = nxt[:n].copy()
         self.index[rows] = nxt[n:]
@@ -560,7 +567,9 @@ class SegmentTracker:
         moved = after != before
         if moved.any():
             reward = reward.copy()
-            reward[moved] = self.task.reward_and_next_batch(states[moved], None, after[moved])[0]
+            reward[moved] = self.task.reward_and_next_batch(
+                states[moved], None, after[moved], self._inputs
+            )[0]
         return progress_potential(after, reward)
 
     def _shape(
