@@ -170,6 +170,13 @@ def test_terminate_on_completion():
     assert not any(plain.step(UP)[2] for _ in range(4))
 
 
+def test_terminate_on_completion_when_complete_at_reset():
+    task = TaskModel([Region([0.0], [[0.01]], 9.0)], [QuadraticReward([0.0], [[1.0]])])
+    env = SwirlWrapper(PointEnv(), task, terminate_on_completion=True)
+    assert env.reset()[1]["segment"] == task.n_segments  # the start is inside the only region
+    assert env.step(STAY)[2]
+
+
 def test_env_termination_and_truncation_pass_through():
     env = SwirlWrapper(PointEnv(limit=0.9, max_steps=3), line_task())
     env.reset()
@@ -453,11 +460,18 @@ def test_swirl_vector_wrapper_matches_independent_wrappers(mode, as_dict, kwargs
         np.testing.assert_array_equal(got[2], ref[2])
         np.testing.assert_array_equal(got[3], ref[3])
         np.testing.assert_array_equal(got[4]["segment"], ref[4]["segment"])
-        if "task_reward" in ref[4]:  # absent when every sub-env was resetting this step
-            stepped = ref[4]["_task_reward"]
-            np.testing.assert_array_equal(
-                got[4]["task_reward"][stepped], ref[4]["task_reward"][stepped]
-            )
+        # the info keys, their masks (reset rows hold a reset's info) and final_info's keys
+        for got_info, ref_info in (
+            (got[4], ref[4]),
+            (got[4].get("final_info"), ref[4].get("final_info")),
+        ):
+            if ref_info is None:
+                continue
+            for key in ("segment", "task_reward", "segment_reward"):
+                mask = ref_info.get("_" + key, np.zeros(N_ENVS, dtype=bool))
+                np.testing.assert_array_equal(got_info["_" + key], mask, err_msg=key)
+                if mask.any():
+                    np.testing.assert_allclose(got_info[key][mask], ref_info[key][mask], rtol=1e-12)
         if "final_obs" in ref[4]:
             for i in np.flatnonzero(ref[4]["_final_obs"]):
                 _assert_obs_equal(got[4]["final_obs"][i], ref[4]["final_obs"][i])
@@ -484,6 +498,7 @@ def test_vector_partial_reset_with_mask():
     assert envs.tracker.index.tolist() == [1, 1] and envs.tracker.t.tolist() == [2, 2]
     _, info = envs.reset(options={"reset_mask": np.array([True, False])})
     assert info["segment"].tolist() == [0, 1] and envs.tracker.t.tolist() == [0, 2]
+    assert info["_segment"].tolist() == [True, False]  # only the reset row has a reset info
 
 
 def test_all_wrappers_expose_the_task():

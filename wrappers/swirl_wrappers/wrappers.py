@@ -334,8 +334,8 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._t += 1
         before = self.segment
         reward, self.segment = self.task.reward_and_next(state, self._t, before)
-        if self.segment != before and self.terminate_on_completion:
-            terminated = terminated or self.segment == self.task.n_segments
+        if self.terminate_on_completion and self.segment == self.task.n_segments:
+            terminated = True  # also on the first step of an episode complete at reset
         if self.reward_mode == "potential":
             # Phi = 0 after a termination keeps the shaping policy-invariant; a truncation
             # keeps Phi(s'), which the agent bootstraps from.
@@ -613,8 +613,12 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
     ``infos["final_obs"]`` is lifted with the index it ended with, and ``infos["segment"]`` is
     the new episode's index, as a reset info would say) and ``DISABLED`` (reset sub-envs with
     ``reset(options={"reset_mask": mask})``). ``infos`` gets ``"segment"``, ``"task_reward"``
-    and ``"segment_reward"`` arrays (with their ``"_"`` masks). The results equal those of a
-    vector env of :class:`SwirlWrapper` s, in one numpy pass over the sub-envs.
+    and ``"segment_reward"`` arrays with their ``"_"`` masks, as from a vector env of
+    :class:`SwirlWrapper` s: a sub-env that was reset holds a reset's info (``"segment"``
+    only), and in ``SAME_STEP`` mode the ended transitions' keys are in ``infos["final_info"]``.
+    The results are those of the :class:`SwirlWrapper` s, in one numpy pass over the sub-envs,
+    up to floating-point rounding (the batched product sums in another order, so a state within
+    about 1e-15 of a region's boundary may be inside for one and outside for the other).
 
     ``terminate_on_completion`` needs the sub-environment to be reset, which a vector wrapper
     cannot do; wrap each sub-env with :class:`SwirlWrapper` instead (``gymnasium.make_vec(...,
@@ -706,7 +710,7 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
         self.tracker.reset(self.tracker.states(obs), mask)
         self._autoreset[mask] = False
         infos[SEGMENT_KEY] = self.tracker.index.copy()
-        infos["_" + SEGMENT_KEY] = self._all.copy()
+        infos["_" + SEGMENT_KEY] = mask.copy()  # the rows that were reset
         return self.tracker.lift(obs), infos
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
@@ -714,7 +718,12 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
         states = self.tracker.states(obs)
         done = np.logical_or(terminations, truncations)
         env_signals = {"task_rewards": task_rewards, "terminated": terminations}
+        # Rows whose top-level info is a step's (None: all). As from independent SwirlWrappers,
+        # a row that was reset holds the reset info: "segment" only.
+        stepped = None
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            if np.count_nonzero(self._autoreset):
+                stepped = ~self._autoreset
             rewards = self.tracker.step(states, restart=self._autoreset, **env_signals)
             self._autoreset = done
         elif self.autoreset_mode == AutoresetMode.SAME_STEP and np.count_nonzero(done):
@@ -730,15 +739,26 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
             )
             for i in final:
                 final_obs[i] = self.tracker.lift(final_obs[i], self.tracker.ended_index[i])
+            # The ended transitions' keys go with their final_info, as the sub-envs' would.
+            final_info = infos.setdefault("final_info", {})
+            for key, values in (
+                (SEGMENT_KEY, self.tracker.ended_index),
+                ("task_reward", task_rewards),
+                ("segment_reward", rewards),
+            ):
+                final_info[key] = np.array(values)
+                final_info["_" + key] = done
+            stepped = ~done
         else:
             rewards = self.tracker.step(states, **env_signals)
         # The tracker never writes into an index array it has published: no copy needed.
         infos[SEGMENT_KEY] = self.tracker.index
         infos["task_reward"] = np.array(task_rewards)  # the sub-envs reuse their reward buffer
         infos["segment_reward"] = rewards.copy()
-        # One all-true mask shared by the three keys (a copy each costs more than the keys).
-        infos["_" + SEGMENT_KEY] = infos["_task_reward"] = infos["_segment_reward"] = (
-            self._all.copy()
+        # Masks shared between keys (a copy each costs more than the keys).
+        infos["_" + SEGMENT_KEY] = self._all.copy()
+        infos["_task_reward"] = infos["_segment_reward"] = (
+            infos["_" + SEGMENT_KEY] if stepped is None else stepped
         )
         return (
             self.tracker.lift(obs),
