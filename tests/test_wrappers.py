@@ -669,3 +669,21 @@ def test_tracker_needs_the_env_signals_its_reward_mode_uses():
     quadratic = SegmentTracker(line_task(), 2, space)
     quadratic.reset(np.zeros((2, 1)))
     assert quadratic.step(np.ones((2, 1))).shape == (2,)  # the default mode needs neither
+
+
+def test_tracker_refuses_batches_of_the_wrong_shape():
+    task = plane_task()
+    tracker = SegmentTracker(task, 3, PointEnv(dim=2).observation_space)
+    good = np.zeros((3, 2))
+    with pytest.raises(ValueError, match=r"states must have shape \(3, 2\)"):
+        tracker.reset(np.zeros((1, 2)))
+    tracker.reset(good)
+    for states in (np.zeros((1, 2)), np.zeros((3, 1)), np.zeros(3)):
+        with pytest.raises(ValueError, match=r"states must have shape \(3, 2\)"):
+            tracker.step(states)
+    with pytest.raises(ValueError, match="restart must have shape"):
+        tracker.step(good, restart=np.array([True, False]))
+    with pytest.raises(ValueError, match="one state per restart row"):
+        tracker.step(good, restart=np.array([True, False, True]), final_states=np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="num_envs"):
+        SegmentTracker(task, 2.7, PointEnv(dim=2).observation_space)

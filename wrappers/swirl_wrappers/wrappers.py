@@ -429,10 +429,14 @@ class SegmentTracker:
         self.observation_space, self.state_key = lift_observation_space(
             observation_space, task, state_key
         )
-        if int(num_envs) < 1:
-            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         self.task = task
         self.num_envs = int(num_envs)
+        state_space = (
+            observation_space if self.state_key is None else observation_space[self.state_key]
+        )
+        self._batch_shape = (self.num_envs, *state_space.shape)
         self.reward_scale, self.region_bonus = _check_scalars(reward_scale, region_bonus)
         self.reward_mode, self.task_reward_weight, self.gamma = _check_reward_options(
             reward_mode, task_reward_weight, gamma
@@ -465,6 +469,7 @@ class SegmentTracker:
 
         ``t`` becomes 0 and the index ``M(s_0, 0, 0)`` (1 if ``s_0`` is already in region 0).
         """
+        self._check_batch(states, mask, "mask")
         if mask is None:
             mask = np.ones(self.num_envs, dtype=bool)
         zeros = self._zeros[: int(np.count_nonzero(mask))]
@@ -515,6 +520,7 @@ class SegmentTracker:
             raise ValueError("reward_mode='potential' needs the terminated flags of each step")
         if self.task_reward_weight != 0.0 and task_rewards is None:
             raise ValueError("task_reward_weight != 0 needs the environment's task_rewards")
+        self._check_batch(states, restart, "restart")
         before = self.index
         self._clock += 1
         t = self.t if self._timed else None
@@ -525,6 +531,11 @@ class SegmentTracker:
             return self._shape(reward, before, self.index, states, task_rewards, terminated)
         rows = restart.nonzero()[0]
         zeros = self._zeros[: len(rows)]
+        if final_states is not None and np.shape(final_states) != (len(rows), *states.shape[1:]):
+            raise ValueError(
+                f"final_states must hold one state per restart row, shape "
+                f"{(len(rows), *states.shape[1:])}, got {np.shape(final_states)}"
+            )
         if final_states is None:
             # Index 0 at t = 0 makes the restart rows compute exactly reset's M(s_0, 0, 0).
             index = before.copy()
@@ -559,6 +570,15 @@ class SegmentTracker:
         if self.reward_mode == "potential":
             self.potential[rows] = self._potentials(states[rows], reward[n:], zeros, nxt[n:])
         return shaped
+
+    def _check_batch(self, states: Any, rows: Any, name: str) -> None:
+        if np.shape(states) != self._batch_shape:
+            raise ValueError(
+                f"states must have shape {self._batch_shape} (num_envs, state_dim), "
+                f"got {np.shape(states)}"
+            )
+        if rows is not None and np.shape(rows) != (self.num_envs,):
+            raise ValueError(f"{name} must have shape ({self.num_envs},), got {np.shape(rows)}")
 
     def _potentials(
         self, states: np.ndarray, reward: np.ndarray, before: np.ndarray, after: np.ndarray
