@@ -254,8 +254,20 @@ def test_rgb_render():
 
 def test_bad_input_raises():
     env = quiet_env()
-    with pytest.raises(ValueError, match="action"):
-        env.step(5)
+    env.reset(seed=0)
+    rng_state = env.np_random.bit_generator.state
+    for action in (5, 1.7, "1", np.array([1]), None):
+        with pytest.raises(ValueError, match="action"):
+            env.step(action)
+    assert env.np_random.bit_generator.state == rng_state  # a refused action draws no noise
+    env.step(np.int64(1))  # integer numpy scalars are actions
+    for kwargs in ({"max_speed": float("inf")}, {"steering_noise_deg": float("nan")}):
+        with pytest.raises(ValueError, match="finite"):
+            ParallelParkingEnv(**kwargs)
+    with pytest.raises(ValueError, match="speed unit"):
+        ParallelParkingEnv(max_speed=0.01)
+    with pytest.raises(ValueError, match="finite"):
+        env.set_state(float("nan"), 0.0, 0.0)
     with pytest.raises(ValueError, match="multiple"):
         env.set_state(0.0, 0.0, 0.0, 0.12)
     with pytest.raises(ValueError, match="noise_probability"):

@@ -16,6 +16,7 @@ The two obstacles (parked cars of the same size as ours, 2 m x 1 m) are 5 m apar
 from __future__ import annotations
 
 import math
+import operator
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -161,8 +162,18 @@ class ParallelParkingEnv(gym.Env):
             raise ValueError(f"noise_probability must be in [0, 1], got {noise_probability}")
         if not 0.0 < max_steering_deg < 90.0:
             raise ValueError(f"max_steering_deg must be in (0, 90), got {max_steering_deg}")
-        if not max_speed > 0:
-            raise ValueError(f"max_speed must be positive, got {max_speed}")
+        for name, value in (
+            ("dt", dt),
+            ("steering_noise_deg", steering_noise_deg),
+            ("max_speed", max_speed),
+        ):
+            if not math.isfinite(value):
+                raise ValueError(f"{name} must be finite, got {value}")
+        if not max_speed >= 0.05 * dt:
+            raise ValueError(
+                f"max_speed must be at least one speed unit (0.05 * dt = {0.05 * dt} m/s), "
+                f"got {max_speed}"
+            )
         self.render_mode = render_mode
         self.partial_observation = partial_observation
         self.perturbed = perturbed
@@ -300,6 +311,8 @@ class ParallelParkingEnv(gym.Env):
         ValueError
             If ``v`` is not a multiple of :attr:`speed_unit` within the speed limit.
         """
+        if not all(math.isfinite(value) for value in (x, y, theta, v)):
+            raise ValueError(f"the state must be finite, got {(x, y, theta, v)}")
         units = round(v / self.speed_unit)
         if abs(units * self.speed_unit - v) > 1e-9 or abs(units) > self._max_units:
             raise ValueError(
@@ -326,13 +339,19 @@ class ParallelParkingEnv(gym.Env):
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply one action; see the class docstring for dynamics, noise and termination."""
+        try:  # operator.index: ints and integer numpy scalars, not floats or strings
+            index = operator.index(action)
+        except TypeError:
+            index = -1
+        if not 0 <= index < self.action_space.n:
+            raise ValueError(f"invalid action {action!r} for {self.action_space}")
         noise = 0.0
         p = self.noise_probability
         if p > 0.0:
             r = self.np_random.random()
             if r < p:
                 noise = self.steering_noise if r < 0.5 * p else -self.steering_noise
-        state = self.simulate(self._state, int(action), noise)
+        state = self.simulate(self._state, index, noise)
         self._state = state
         collision = self.collides(state)
         success = not collision and self.is_parked(state)
