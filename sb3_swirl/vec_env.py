@@ -75,6 +75,11 @@ class SwirlVecEnv(VecEnvWrapper):
         task_reward_weight: float | None = None,
         gamma: float = 0.99,
     ) -> None:
+        if not isinstance(venv, VecEnv):
+            raise ValueError(
+                f"SwirlVecEnv wraps an SB3 VecEnv, got {type(venv).__name__}: vectorise the env "
+                "first (DummyVecEnv), or wrap a gymnasium env with SwirlWrapper"
+            )
         if terminate_on_completion:
             raise ValueError(
                 "SwirlVecEnv cannot end one sub-environment's episode on completion; wrap each "

@@ -100,7 +100,7 @@ def test_failed_demo_is_an_error_naming_the_seed(acrobot_demos):
     kept = collect_demos(ACROBOT, 2, seed=0, max_attempts=3, max_episode_steps=limit)
     for got, want in zip(kept, acrobot_demos[1:], strict=True):
         np.testing.assert_array_equal(got.observations, want.observations)
-    with pytest.raises(RuntimeError, match="1 of 2 demos"):
+    with pytest.raises(RuntimeError, match=r"1 of 2 demos.*attempts are spent"):
         collect_demos(ACROBOT, 2, seed=0, max_attempts=2, max_episode_steps=limit)
 
 
@@ -129,7 +129,13 @@ def test_unknown_env_id_lists_the_supported_ids():
 
 @pytest.mark.parametrize(
     ("kwargs", "match"),
-    [({"n": 0}, "n must"), ({"n": 2.0}, "n must"), ({"n": 3, "max_attempts": 2}, "max_attempts")],
+    [
+        ({"n": 0}, "n must"),
+        ({"n": 2.0}, "n must"),
+        ({"n": 3, "max_attempts": 2}, "max_attempts"),
+        ({"n": 2, "seed": -1}, "seed must"),
+        ({"n": 2, "seed": 1.5}, "seed must"),
+    ],
 )
 def test_bad_counts(kwargs, match):
     with pytest.raises(ValueError, match=match):

@@ -486,6 +486,8 @@ def test_vector_wrappers_refuse_terminate_on_completion():
         SwirlVecEnv(DummyVecEnv([PointEnv]), line_task(), terminate_on_completion=True)
     with pytest.raises(ValueError, match="SwirlWrapper"):
         SwirlVectorWrapper(SyncVectorEnv([PointEnv]), line_task(), terminate_on_completion=True)
+    with pytest.raises(ValueError, match="wraps an SB3 VecEnv"):
+        SwirlVecEnv(PointEnv(), line_task())
 
 
 def test_vector_partial_reset_with_mask():

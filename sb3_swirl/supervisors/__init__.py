@@ -118,6 +118,10 @@ def collect_demos(
     attempts = n if max_attempts is None else max_attempts
     if isinstance(attempts, bool) or not isinstance(attempts, int | np.integer) or attempts < n:
         raise ValueError(f"max_attempts must be an integer >= n = {n}, got {max_attempts!r}")
+    if seed is not None and (
+        isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0
+    ):
+        raise ValueError(f"seed must be None or an integer >= 0, got {seed!r}")
     children = np.random.SeedSequence(seed).spawn(int(attempts))
 
     env = gym.make(env_id, **env_kwargs)
@@ -143,7 +147,11 @@ def collect_demos(
         raise RuntimeError(
             f"{supervisor_cls.__name__} failed on {env_id} with env seed(s) {failed} "
             f"({len(demos)} of {n} demos collected in {len(demos) + len(failed)} episodes); "
-            "pass max_attempts > n to skip failed episodes"
+            + (
+                "pass max_attempts > n to skip failed episodes"
+                if max_attempts is None
+                else f"all {attempts} attempts are spent; raise max_attempts"
+            )
         )
     return demos
 
