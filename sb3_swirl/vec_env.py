@@ -20,7 +20,10 @@ class SwirlVecEnv(VecEnvWrapper):
     rewards and ``info`` keys (``"segment"``, ``"task_reward"``, ``"segment_reward"``). SB3
     vector envs reset a sub-env as soon as it is done: the transition's reward is computed on
     ``infos[i]["terminal_observation"]``, which is lifted with the index the episode ended with,
-    and the returned observation starts the new episode.
+    and the returned observation starts the new episode. The env's own rewards are those the
+    vector env returns: float32 in SB3's ``DummyVecEnv``, so ``info["task_reward"]`` (and a
+    ``task_reward_weight`` or ``"potential"`` reward built on it) can differ from a
+    ``SwirlWrapper``'s in the last float32 digit.
 
     Put it directly on the environments (below ``VecNormalize`` or ``VecFrameStack``): the
     task's regions live in the raw observation space.
