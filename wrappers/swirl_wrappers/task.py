@@ -492,16 +492,17 @@ class TaskModel:
         return x if tb.features is None else tb.features(x)
 
     def _region_distances(self, obs: np.ndarray) -> np.ndarray:
-        """Squared Mahalanobis distance over threshold to every index's region: (..., n_indices).
+        """Squared Mahalanobis distance over threshold to every index's region: (n, n_indices).
 
         A state is inside region ``i`` when column ``i`` is at most 1; the last column (index
         ``k``, which has no region) is always above 1.
         """
-        tb = self._tables
-        z = self._task_input(obs).dot(tb.factors_t)
-        z -= tb.offsets.ravel()
+        x = self._task_input(obs)
+        inputs = self.input_buffer(len(x))
+        inputs[:, :-1] = x
+        z = inputs.dot(self._tables.weights)  # the product of reward_and_next_batch
         z *= z
-        return z.reshape(*z.shape[:-1], self.n_indices, 2, -1)[..., 1, :].sum(axis=-1)
+        return z.reshape(len(x), self.n_indices, 2, -1)[:, :, 1, :].sum(axis=-1)
 
     def reward_and_next(self, obs: np.ndarray, t: float | None, index: int) -> tuple[float, int]:
         """Reward and segmentation step for one state, as Python scalars (the wrappers' hot path).
@@ -731,8 +732,10 @@ class _Tables:
     ``L_i^{-1} (x - m_i) / sqrt(threshold_i)`` with ``L_i L_i^T`` region ``i``'s covariance: one
     small product, a square and two signed block sums (``halves``) give the reward ``R_i(x)``
     and a distance that is at most 1 exactly inside region ``i``. The final index has no
-    region; a constant offset keeps its distance at 4. Wrappers call this every step, so it is
-    built once.
+    region; a constant offset keeps its distance at 4. ``weights`` stacks every index's
+    ``factors[i].T`` over the row ``-offsets``, so ``[x, 1] @ weights`` evaluates all indices in
+    one product (batches); ``factor_list`` / ``offset_list`` serve one state at one index.
+    Wrappers call this every step, so it is built once.
     """
 
     select: np.ndarray | slice
@@ -741,8 +744,6 @@ class _Tables:
     lift: np.ndarray | None
     lift_shift: np.ndarray | None
     n_trig: int
-    factors_t: np.ndarray
-    offsets: np.ndarray
     weights: np.ndarray
     halves: np.ndarray
     factor_list: list[np.ndarray]
@@ -807,8 +808,6 @@ class _Tables:
             lift=lift,
             lift_shift=lift_shift,
             n_trig=n_trig,
-            factors_t=factors_t,
-            offsets=offsets,
             # [x, 1] @ weights = factors @ x - offsets, for every index at once
             weights=np.vstack([factors_t, -offsets.reshape(1, -1)]),
             halves=halves,
