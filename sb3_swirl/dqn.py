@@ -19,9 +19,9 @@ from stable_baselines3.dqn.policies import DQNPolicy
 from torch import nn
 from torch.nn import functional as F
 
+from sb3_swirl._checks import is_finite_real, is_integer
 from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.features import RBFFeaturesExtractor
-from sb3_swirl.segmentation import is_finite_real
 from sb3_swirl.vec_env import SwirlVecEnv
 from swirl_wrappers import SegmentTracker, SwirlWrapper, TaskModel
 
@@ -82,14 +82,11 @@ def _inverse_dynamics_settings(kwargs: dict[str, Any] | None) -> dict[str, Any]:
         raise ValueError(f"unknown inverse_dynamics_kwargs {sorted(unknown)}; use {list(settings)}")
     settings.update(kwargs or {})
 
-    def count(value: Any) -> bool:
-        return isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 1
-
     arch = settings["net_arch"]
-    if not (isinstance(arch, list | tuple) and all(count(width) for width in arch)):
+    if not (isinstance(arch, list | tuple) and all(is_integer(width, 1) for width in arch)):
         raise ValueError(f"inverse_dynamics_kwargs net_arch must be a list of widths, got {arch!r}")
     for name in ("epochs", "batch_size"):
-        if not count(settings[name]):
+        if not is_integer(settings[name], 1):
             raise ValueError(
                 f"inverse_dynamics_kwargs {name} must be an integer >= 1, got {settings[name]!r}"
             )

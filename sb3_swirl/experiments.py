@@ -20,6 +20,8 @@ import yaml
 from rich.console import Console
 from rich.table import Table
 
+from sb3_swirl._checks import is_integer
+
 console = Console(stderr=True)
 
 
@@ -110,7 +112,7 @@ def rollouts_to_success(curve: list[dict[str, float]], target: float) -> int | N
 
 
 def _check_count(value: Any, name: str, minimum: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+    if not is_integer(value, minimum):
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
 
 

@@ -17,12 +17,9 @@ from typing import Any
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from sb3_swirl._checks import is_finite_real
 from sb3_swirl.demos import Demonstration, as_demonstrations
-from sb3_swirl.segmentation import (
-    TransitionStateClustering,
-    is_finite_real,
-    segment_boundaries,
-)
+from sb3_swirl.segmentation import TransitionStateClustering, segment_boundaries
 from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
 
 

@@ -17,7 +17,6 @@ Three indicators are provided (§9.5 of the paper compares them) and any callabl
 from __future__ import annotations
 
 import math
-import numbers
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -30,6 +29,7 @@ from sklearn.mixture import BayesianGaussianMixture, GaussianMixture
 from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
+from sb3_swirl._checks import is_finite_real, is_integer
 from sb3_swirl.demos import as_demonstrations
 from swirl_wrappers import RBFFeatures, Region
 
@@ -295,11 +295,6 @@ _INDICATORS = {"gmm", "velocity", "linear"}
 
 
 # ---------------------------------------------------------------------------- regions
-def is_finite_real(value: Any) -> bool:
-    """Whether ``value`` is a finite real number (not a bool, string or None)."""
-    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
-
-
 def segment_boundaries(
     states: np.ndarray, regions: Sequence[Region], times: np.ndarray | None = None
 ) -> np.ndarray:
@@ -575,7 +570,7 @@ class TransitionStateClustering(BaseEstimator):
             value = getattr(self, name)
             if name == "window" and value is None:
                 continue
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+            if not is_integer(value, 1):
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         if self.kernel not in (None, "rbf"):
             raise ValueError(f"kernel must be None or 'rbf', got {self.kernel!r}")

@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 import sb3_swirl.envs  # noqa: F401  (registers the sb3_swirl/ env ids)
+from sb3_swirl._checks import is_integer
 from sb3_swirl.demos import Demonstration
 from sb3_swirl.supervisors.acrobot import AcrobotSupervisor
 
@@ -113,14 +114,12 @@ def collect_demos(
     (4, dtype('int64'))
     """
     supervisor_cls = supervisor_for(env_id)
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+    if not is_integer(n, 1):
         raise ValueError(f"n must be a positive integer, got {n!r}")
     attempts = n if max_attempts is None else max_attempts
-    if isinstance(attempts, bool) or not isinstance(attempts, int | np.integer) or attempts < n:
+    if not is_integer(attempts, n):
         raise ValueError(f"max_attempts must be an integer >= n = {n}, got {max_attempts!r}")
-    if seed is not None and (
-        isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0
-    ):
+    if seed is not None and not is_integer(seed, 0):
         raise ValueError(f"seed must be None or an integer >= 0, got {seed!r}")
     children = np.random.SeedSequence(seed).spawn(int(attempts))
 
