@@ -296,15 +296,15 @@ class SwirlDQN(DQN):
         ):
             if int(value) < (0 if name == "bc_epochs" else 1):
                 raise ValueError(f"{name} must be a positive integer, got {value}")
-        for name, value, low in (
-            ("bc_lr", bc_lr, 0.0),
-            ("bc_margin", bc_margin, None),
-            ("bc_td_coef", bc_td_coef, None),
-            ("demo_loss_coef", demo_loss_coef, None),
+        for name, value, positive in (
+            ("bc_lr", bc_lr, True),
+            ("bc_margin", bc_margin, False),
+            ("bc_td_coef", bc_td_coef, False),
+            ("demo_loss_coef", demo_loss_coef, False),
         ):
-            if not (is_finite_real(value) and (value > low if low is not None else value >= 0)):
-                sign = "> 0" if low is not None else ">= 0"
-                raise ValueError(f"{name} must be a finite number {sign}, got {value!r}")
+            if not (is_finite_real(value) and (value > 0 if positive else value >= 0)):
+                bound = "> 0" if positive else ">= 0"
+                raise ValueError(f"{name} must be a finite number {bound}, got {value!r}")
         _inverse_dynamics_settings(inverse_dynamics_kwargs)  # fail now, not after the steps
         n_step = max(int(n_steps), int(dict(replay_buffer_kwargs or {}).get("n_steps", 1)))
         if prefill_replay and (n_step > 1 or optimize_memory_usage):
