@@ -129,19 +129,21 @@ class SwirlVecEnv(VecEnvWrapper):
             # infos[i]["terminal_observation"], lifted with the index the episode ended with.
             terminal = [infos[i]["terminal_observation"] for i in done]
             # np.array: one C call, where np.stack loops over the rows in Python.
-            final_states = np.array([tracker.states(o) for o in terminal])
-            rewards = tracker.step(
-                tracker.states(obs), dones, final_states, task_rewards, terminated
+            final_states = np.array(
+                terminal if tracker.state_key is None else [tracker.states(o) for o in terminal]
             )
-            ended = tracker.ended_index[rows]  # an array index: a list would be converted
-            if tracker.state_key is None:  # Box: the final states are the whole observations
-                for i, lifted in zip(done, tracker.lift(final_states, ended), strict=True):
-                    infos[i]["terminal_observation"] = lifted
-            else:
-                for i, obs_i, index in zip(done, terminal, ended.tolist(), strict=True):
-                    infos[i]["terminal_observation"] = tracker.lift(obs_i, index)
+            lifted, rewards, lifted_final = tracker.step_lift(
+                obs, dones, final_states, task_rewards, terminated
+            )
+            if lifted_final is None:  # Dict observations
+                lifted_final = [
+                    tracker.lift(o, index)
+                    for o, index in zip(terminal, tracker.ended_index[rows].tolist(), strict=True)
+                ]
+            for i, lifted_obs in zip(done, lifted_final, strict=True):
+                infos[i]["terminal_observation"] = lifted_obs
         else:
-            rewards = tracker.step(tracker.states(obs), None, None, task_rewards, terminated)
+            lifted, rewards, _ = tracker.step_lift(obs, None, None, task_rewards, terminated)
         for info, index, task_reward, reward in zip(
             infos,
             tracker.ended_index.tolist(),
@@ -152,4 +154,4 @@ class SwirlVecEnv(VecEnvWrapper):
             info[SEGMENT_KEY] = index
             info["task_reward"] = task_reward
             info["segment_reward"] = reward
-        return tracker.lift(obs), rewards.astype(np.float32), dones, infos
+        return lifted, rewards.astype(np.float32), dones, infos

@@ -21,12 +21,25 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 from sb3_swirl.vec_env import SwirlVecEnv
 from swirl_wrappers import (
     QuadraticReward,
+    RBFFeatures,
     Region,
     SegmentTracker,
     SwirlVectorWrapper,
     SwirlWrapper,
     TaskModel,
+    _compiled,
 )
+
+
+@pytest.fixture(params=["compiled", "numpy"])
+def backend(request, monkeypatch):
+    """Run a test on the tracker's compiled step (numba) and on its numpy path."""
+    if request.param == "numpy":
+        monkeypatch.setattr(_compiled, "step", None)
+    else:
+        # Not a skip: sb3-swirl installs numba, so the compiled path is the one users run.
+        assert _compiled.step is not None, "numba is missing: pip install swirl-wrappers[numba]"
+    return request.param
 
 
 class PointEnv(gym.Env):
@@ -394,7 +407,7 @@ def _assert_obs_equal(a, b):
 @pytest.mark.parametrize("timed", [False, True], ids=["untimed", "timed"])
 @pytest.mark.parametrize("kwargs", ["quadratic", "potential"])
 @pytest.mark.parametrize("as_dict", [False, True], ids=["box", "dict"])
-def test_swirl_vec_env_matches_independent_wrappers(as_dict, kwargs, timed):
+def test_swirl_vec_env_matches_independent_wrappers(as_dict, kwargs, timed, backend):
     kwargs = SWIRL_KWARGS if kwargs == "quadratic" else POTENTIAL_KWARGS
     task = plane_task(timed)
     make = _make_point(as_dict)
@@ -435,7 +448,7 @@ POTENTIAL_KWARGS = {
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
 @pytest.mark.parametrize("as_dict", [False, True], ids=["box", "dict"])
 @pytest.mark.parametrize("timed", [False, True], ids=["untimed", "timed"])
-def test_swirl_vector_wrapper_matches_independent_wrappers(mode, as_dict, kwargs, timed):
+def test_swirl_vector_wrapper_matches_independent_wrappers(mode, as_dict, kwargs, timed, backend):
     task = plane_task(timed)
     make = _make_point(as_dict)
     reference = SyncVectorEnv(
@@ -660,7 +673,7 @@ def test_invalid_reward_options(kwargs, message):
         SegmentTracker(line_task(), 1, PointEnv().observation_space, **kwargs)
 
 
-def test_tracker_needs_the_env_signals_its_reward_mode_uses():
+def test_tracker_needs_the_env_signals_its_reward_mode_uses(backend):
     space = PointEnv().observation_space
     tracker = SegmentTracker(line_task(), 2, space, reward_mode="potential")
     tracker.reset(np.zeros((2, 1)))
@@ -673,7 +686,7 @@ def test_tracker_needs_the_env_signals_its_reward_mode_uses():
     assert quadratic.step(np.ones((2, 1))).shape == (2,)  # the default mode needs neither
 
 
-def test_tracker_refuses_batches_of_the_wrong_shape():
+def test_tracker_refuses_batches_of_the_wrong_shape(backend):
     task = plane_task()
     tracker = SegmentTracker(task, 3, PointEnv(dim=2).observation_space)
     good = np.zeros((3, 2))
@@ -685,7 +698,84 @@ def test_tracker_refuses_batches_of_the_wrong_shape():
             tracker.step(states)
     with pytest.raises(ValueError, match="restart must have shape"):
         tracker.step(good, restart=np.array([True, False]))
-    with pytest.raises(ValueError, match="one state per restart row"):
-        tracker.step(good, restart=np.array([True, False, True]), final_states=np.zeros((1, 2)))
+    restart = np.array([True, False, True])
+    for final in (np.zeros((1, 2)), np.zeros((3, 2)), np.zeros((2, 3)), np.zeros(2)):
+        with pytest.raises(ValueError, match="one state per restart row"):
+            tracker.step(good, restart=restart, final_states=final)
+    # A refused step changes nothing.
+    assert tracker.t.tolist() == [0, 0, 0] and tracker.index.tolist() == [0, 0, 0]
+    weighted = SegmentTracker(task, 3, PointEnv(dim=2).observation_space, task_reward_weight=1.0)
+    weighted.reset(good)
+    with pytest.raises(ValueError, match=r"task_rewards must have shape \(3,\)"):
+        weighted.step(good, task_rewards=np.zeros(2))
     with pytest.raises(ValueError, match="num_envs"):
         SegmentTracker(task, 2.7, PointEnv(dim=2).observation_space)
+
+
+def _tracker_tasks() -> dict[str, tuple[TaskModel, int]]:
+    """Tasks with linear and non-linear (angle features, an RBF map) inputs: (task, obs dim)."""
+    rng = np.random.default_rng(0)
+
+    def random_regions(p: int) -> tuple[list[Region], list[QuadraticReward]]:
+        regions, rewards = [], []
+        for _ in range(3):
+            a = rng.normal(size=(p, p))
+            regions.append(Region(rng.normal(size=p) * 0.3, a @ a.T + 0.5 * np.eye(p), 4.0))
+            rewards.append(QuadraticReward(rng.normal(size=p), a.T @ a))
+        return regions, rewards
+
+    rbf = RBFFeatures(rng.normal(size=(6, 3)), 0.7, rng.normal(size=(6, 2)), rng.normal(size=2))
+    return {
+        "plane": (plane_task(), 2),
+        "timed": (plane_task(timed=True), 2),
+        "dims": (TaskModel(*random_regions(2), dims=(3, 1)), 5),
+        "angles": (TaskModel(*random_regions(6), dims=(4, 0), angles=((1,), (1, 3))), 5),
+        "rbf": (TaskModel(*random_regions(2), dims=(4, 0, 2), features=rbf), 5),
+    }
+
+
+@pytest.mark.parametrize("task_name", ["plane", "timed", "dims", "angles", "rbf"])
+@pytest.mark.parametrize(
+    "kwargs",
+    [{}, SWIRL_KWARGS, {"task_reward_weight": 0.3}, POTENTIAL_KWARGS],
+    ids=["plain", "scale-bonus", "task-weight", "potential"],
+)
+def test_compiled_tracker_matches_its_numpy_path(task_name, kwargs):
+    """Every step of the compiled tracker agrees with numpy: no restarts, NEXT_STEP, SAME_STEP."""
+    assert _compiled.step is not None, "numba is missing: pip install swirl-wrappers[numba]"
+    task, dim = _tracker_tasks()[task_name]
+    n = 8
+    space = spaces.Box(-5.0, 5.0, (dim,), dtype=np.float32)
+    compiled, reference = (SegmentTracker(task, n, space, **kwargs) for _ in range(2))
+    reference.compiled = False
+    assert compiled.compiled
+    rng = np.random.default_rng(1)
+    states = rng.normal(size=(n, dim)).astype(np.float32)
+    compiled.reset(states)
+    reference.reset(states)
+    moved = restarted = 0
+    for step in range(90):
+        states = (states + rng.normal(size=(n, dim)) * 0.4).astype(np.float32)
+        kind = step % 3  # 0: no restart, 1: NEXT_STEP restarts, 2: SAME_STEP restarts
+        restart = rng.random(n) < 0.3 if kind else None
+        final = None
+        if kind == 2:
+            final = rng.normal(size=(int(restart.sum()), dim)).astype(np.float32)
+        signals = {"task_rewards": rng.normal(size=n), "terminated": rng.random(n) < 0.2}
+        before = compiled.index
+        lifted, rewards, lifted_final = compiled.step_lift(states, restart, final, **signals)
+        expected = reference.step_lift(states, restart, final, **signals)
+        np.testing.assert_allclose(rewards, expected[1], rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(lifted, expected[0])
+        if final is None:
+            assert lifted_final is None and expected[2] is None
+        else:
+            np.testing.assert_array_equal(lifted_final, expected[2])
+        for name in ("index", "ended_index", "t"):
+            np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name))
+        if kwargs.get("reward_mode") == "potential":
+            np.testing.assert_allclose(compiled.potential, reference.potential, rtol=1e-12)
+        assert compiled.index is not before  # published index arrays are never written again
+        moved += int(np.count_nonzero(compiled.ended_index != before))
+        restarted += 0 if restart is None else int(restart.sum())
+    assert moved >= 5 and restarted >= 20  # the walks reached regions and restarted

@@ -1,4 +1,4 @@
-"""Gymnasium runtime of a SWIRL proxy task (needs only gymnasium and numpy)."""
+"""Gymnasium runtime of a SWIRL proxy task (needs only gymnasium and numpy; numba optional)."""
 
 from swirl_wrappers.task import SCHEMA_VERSION, QuadraticReward, RBFFeatures, Region, TaskModel
 from swirl_wrappers.wrappers import (

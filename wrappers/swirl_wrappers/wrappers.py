@@ -47,6 +47,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from gymnasium.vector.utils import batch_space
 
+from swirl_wrappers import _compiled
 from swirl_wrappers.task import TaskModel
 
 __all__ = [
@@ -362,7 +363,7 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
 
 class SegmentTracker:
-    """Segment indices and time steps of ``num_envs`` parallel episodes, updated in numpy.
+    """Segment indices and time steps of ``num_envs`` parallel episodes, updated in one pass.
 
     The vectorised core of :class:`SwirlVectorWrapper` and of sb3-swirl's ``SwirlVecEnv``: it
     validates the task against the observation space, holds one index and one step counter per
@@ -392,6 +393,11 @@ class SegmentTracker:
         Steps taken in each sub-environment's current episode.
     potential : ndarray of float64, shape (num_envs,)
         ``Phi`` of each sub-environment's current lifted state (``"potential"`` mode).
+    compiled : bool
+        Whether :meth:`step` and :meth:`step_lift` run as one numba-compiled call (when numba
+        is installed: ``pip install swirl-wrappers[numba]``; sb3-swirl installs it) instead of
+        a few dozen small numpy calls. The results are the same up to floating-point rounding;
+        set it to ``False`` to use numpy.
 
     Examples
     --------
@@ -454,6 +460,27 @@ class SegmentTracker:
         # Inputs of the task's product, reused every step (a restart step evaluates up to
         # 2 num_envs rows: the transitions, then the new episodes' first states).
         self._inputs = task.input_buffer(2 * self.num_envs)
+        # With numba installed, step() and step_lift() are one compiled call
+        # (swirl_wrappers._compiled) on these settings; `compiled = False` selects numpy.
+        self.compiled = _compiled.step is not None
+        self._potential_mode = self.reward_mode == "potential"
+        self._uses_task_rewards = self.task_reward_weight != 0.0
+        tables = task._tables
+        self._weights = np.ascontiguousarray(tables.weights.T)  # a row per output
+        self._t_bounds = np.vstack((tables.t_lo_array, tables.t_hi_array))
+        self._config = np.array([task.task_dim, self._timed, self._potential_mode, 0])
+        self._config_final = self._config.copy()
+        self._config_final[_compiled.HAS_FINAL] = 1
+        self._consts = np.array(
+            [self.reward_scale, self.region_bonus, self.task_reward_weight, self.gamma]
+        )
+        self._index_shape = (2, self.num_envs)
+        self._lifted_dim = state_space.shape[0] + task.n_indices
+        self._lift_dtype = self._one_hot.dtype
+        self._no_rows = np.zeros(0, dtype=bool)
+        self._no_floats = np.zeros(0)
+        self._no_final = np.zeros((0, state_space.shape[0]))
+        self._no_lifted = np.zeros((0, self._lifted_dim))
 
     @property
     def t(self) -> np.ndarray:
@@ -516,11 +543,11 @@ class SegmentTracker:
         ``ended_index`` the index each row's transition ended with (they differ only at
         ``restart`` rows with ``final_states``).
         """
-        if self.reward_mode == "potential" and terminated is None:
-            raise ValueError("reward_mode='potential' needs the terminated flags of each step")
-        if self.task_reward_weight != 0.0 and task_rewards is None:
-            raise ValueError("task_reward_weight != 0 needs the environment's task_rewards")
-        self._check_batch(states, restart, "restart")
+        if self.compiled:
+            return self._compiled_step(states, restart, final_states, task_rewards, terminated)[1]
+        self._check_step(states, restart, task_rewards, terminated)
+        if restart is not None and final_states is not None:
+            self._check_final(states, int(np.count_nonzero(restart)), final_states)
         before = self.index
         self._clock += 1
         t = self.t if self._timed else None
@@ -531,11 +558,6 @@ class SegmentTracker:
             return self._shape(reward, before, self.index, states, task_rewards, terminated)
         rows = restart.nonzero()[0]
         zeros = self._zeros[: len(rows)]
-        if final_states is not None and np.shape(final_states) != (len(rows), *states.shape[1:]):
-            raise ValueError(
-                f"final_states must hold one state per restart row, shape "
-                f"{(len(rows), *states.shape[1:])}, got {np.shape(final_states)}"
-            )
         if final_states is None:
             # Index 0 at t = 0 makes the restart rows compute exactly reset's M(s_0, 0, 0).
             index = before.copy()
@@ -570,6 +592,145 @@ class SegmentTracker:
         if self.reward_mode == "potential":
             self.potential[rows] = self._potentials(states[rows], reward[n:], zeros, nxt[n:])
         return shaped
+
+    def step_lift(
+        self,
+        obs: Any,
+        restart: np.ndarray | None = None,
+        final_states: np.ndarray | None = None,
+        task_rewards: np.ndarray | None = None,
+        terminated: np.ndarray | None = None,
+    ) -> tuple[Any, np.ndarray, np.ndarray | None]:
+        """:meth:`step` on a batch of observations, then :meth:`lift` them: the wrappers' step.
+
+        The arguments are :meth:`step`'s, with the observations in place of the states.
+        Returns ``(lifted_obs, rewards, lifted_final)``: ``lifted_final`` is ``final_states``
+        lifted with the indices their episodes ended with, for Box observations (where the
+        final states are the final observations); ``None`` for Dict observations or without
+        ``final_states``.
+        """
+        if not self.compiled or self.state_key is not None:
+            rewards = self.step(self.states(obs), restart, final_states, task_rewards, terminated)
+            lifted_final = None
+            if final_states is not None and restart is not None and self.state_key is None:
+                lifted_final = self.lift(final_states, self.ended_index[restart])
+            return self.lift(obs), rewards, lifted_final
+        return self._compiled_step(obs, restart, final_states, task_rewards, terminated, True)
+
+    def _compiled_step(
+        self,
+        states: Any,
+        restart: Any,
+        final_states: Any,
+        task_rewards: Any,
+        terminated: Any,
+        lift: bool = False,
+    ) -> tuple[Any, np.ndarray, np.ndarray | None]:
+        """:meth:`step` (and :meth:`lift`, for Box observations) in one compiled call.
+
+        The same results as the numpy path, up to floating-point rounding. The checks are
+        :meth:`step`'s, written for speed: this runs on every step of every vector env.
+        """
+        states = np.asarray(states)
+        if (
+            states.shape != self._batch_shape
+            or (restart is not None and np.shape(restart) != self._index_shape[1:])
+            or self._uses_task_rewards
+            or self._potential_mode
+        ):
+            self._check_step(states, restart, task_rewards, terminated)
+        n = self.num_envs
+        config, final, lifted, lifted_final = self._config, self._no_final, self._no_lifted, None
+        if restart is None:
+            restart = self._no_rows
+        elif final_states is not None:
+            final = np.asarray(final_states)
+            if final.ndim != 2 or final.shape[1:] != states.shape[1:]:
+                self._check_final(states, int(np.count_nonzero(restart)), final)
+            config = self._config_final
+            if lift:
+                lifted_final = np.empty((len(final), self._lifted_dim), self._lifted_dtype(final))
+        if lift:
+            lifted = np.empty((n, self._lifted_dim), self._lifted_dtype(states))
+        reward = np.empty(n)
+        # New arrays, not in-place writes: earlier infos may hold the old ones.
+        index = np.empty(self._index_shape, dtype=np.int64)
+        potential = np.empty(n) if self._potential_mode else self.potential
+        # The kernel reads the leading columns of its task inputs: a linear task's are the
+        # observations themselves.
+        linear = self.task._tables.linear
+        try:
+            _compiled.step(
+                states if linear else self.task._task_input(states),
+                states,
+                final if linear or not len(final) else self.task._task_input(final),
+                final,
+                restart,
+                self.index,
+                self._start,
+                self._clock + 1,
+                self._weights,
+                self._t_bounds,
+                config,
+                self._consts,
+                # Only read when the mode needs them (the checks made sure they were given).
+                np.asarray(task_rewards, dtype=np.float64)
+                if self._uses_task_rewards
+                else self._no_floats,
+                np.asarray(terminated, dtype=bool) if self._potential_mode else self._no_rows,
+                self.potential,
+                reward,
+                index,
+                potential,
+                lifted,
+                self._no_lifted if lifted_final is None else lifted_final,
+            )
+        except ValueError:  # the kernel counts the restart rows before it changes anything
+            self._check_final(states, int(np.count_nonzero(restart)), final)
+            raise
+        self._clock += 1
+        self.index = index[0]
+        self.ended_index = index[1]
+        self.potential = potential
+        return lifted, reward, lifted_final
+
+    def _lifted_dtype(self, obs: np.ndarray) -> np.dtype:
+        """The dtype of ``obs`` lifted (that of concatenating it with the one-hot rows)."""
+        if obs.dtype == self._lift_dtype:
+            return self._lift_dtype
+        return np.promote_types(obs.dtype, self._lift_dtype)
+
+    def _check_step(
+        self,
+        states: Any,
+        restart: Any,
+        task_rewards: Any,
+        terminated: Any,
+    ) -> None:
+        self._check_batch(states, restart, "restart")
+        for name, values, needed in (
+            ("task_rewards", task_rewards, self._uses_task_rewards),
+            ("terminated", terminated, self._potential_mode),
+        ):
+            if not needed:
+                continue
+            if values is None:
+                raise ValueError(
+                    "reward_mode='potential' needs the terminated flags of each step"
+                    if name == "terminated"
+                    else "task_reward_weight != 0 needs the environment's task_rewards"
+                )
+            if np.shape(values) != (self.num_envs,):
+                raise ValueError(
+                    f"{name} must have shape ({self.num_envs},), got {np.shape(values)}"
+                )
+
+    def _check_final(self, states: np.ndarray, n_rows: int, final_states: Any) -> None:
+        if final_states is not None and np.shape(final_states) != (n_rows, *states.shape[1:]):
+            raise ValueError(
+                f"final_states must hold one state per restart row, shape "
+                f"{(n_rows, *states.shape[1:])}, got {np.shape(final_states)}"
+            )
 
     def _check_batch(self, states: Any, rows: Any, name: str) -> None:
         if np.shape(states) != self._batch_shape:
@@ -620,8 +781,8 @@ class SegmentTracker:
 
         ``index`` defaults to the current indices of all sub-environments.
         """
-        one_hot = self._one_hot.take(self.index if index is None else index, axis=0)
-        return lift_observation(obs, one_hot, self.state_key)
+        index = self.index if index is None else index
+        return lift_observation(obs, self._one_hot.take(index, axis=0), self.state_key)
 
 
 class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
@@ -735,7 +896,6 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         obs, task_rewards, terminations, truncations, infos = self.env.step(actions)
-        states = self.tracker.states(obs)
         done = np.logical_or(terminations, truncations)
         env_signals = {"task_rewards": task_rewards, "terminated": terminations}
         # Rows whose top-level info is a step's (None: all). As from independent SwirlWrappers,
@@ -744,21 +904,25 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             if np.count_nonzero(self._autoreset):
                 stepped = ~self._autoreset
-            rewards = self.tracker.step(states, restart=self._autoreset, **env_signals)
+            lifted, rewards, _ = self.tracker.step_lift(obs, self._autoreset, **env_signals)
             self._autoreset = done
         elif self.autoreset_mode == AutoresetMode.SAME_STEP and np.count_nonzero(done):
             # A done row holds the next episode's first observation; the transition ends in
             # infos["final_obs"], which is lifted with the index the episode ended with.
             final = np.flatnonzero(done)
             final_obs = infos["final_obs"]
-            rewards = self.tracker.step(
-                states,
+            lifted, rewards, lifted_final = self.tracker.step_lift(
+                obs,
                 done,
                 np.stack([self.tracker.states(final_obs[i]) for i in final]),
                 **env_signals,
             )
-            for i in final:
-                final_obs[i] = self.tracker.lift(final_obs[i], self.tracker.ended_index[i])
+            for j, i in enumerate(final):
+                final_obs[i] = (
+                    self.tracker.lift(final_obs[i], self.tracker.ended_index[i])
+                    if lifted_final is None
+                    else lifted_final[j]
+                )
             # The ended transitions' keys go with their final_info, as the sub-envs' would.
             final_info = infos.setdefault("final_info", {})
             for key, values in (
@@ -770,7 +934,7 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
                 final_info["_" + key] = done
             stepped = ~done
         else:
-            rewards = self.tracker.step(states, **env_signals)
+            lifted, rewards, _ = self.tracker.step_lift(obs, **env_signals)
         # The tracker never writes into an index array it has published: no copy needed.
         infos[SEGMENT_KEY] = self.tracker.index
         infos["task_reward"] = np.array(task_rewards)  # the sub-envs reuse their reward buffer
@@ -780,10 +944,4 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
         infos["_task_reward"] = infos["_segment_reward"] = (
             infos["_" + SEGMENT_KEY] if stepped is None else stepped
         )
-        return (
-            self.tracker.lift(obs),
-            rewards,
-            terminations,
-            truncations,
-            infos,
-        )
+        return lifted, rewards, terminations, truncations, infos
