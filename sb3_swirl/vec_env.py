@@ -129,9 +129,7 @@ class SwirlVecEnv(VecEnvWrapper):
             # infos[i]["terminal_observation"], lifted with the index the episode ended with.
             terminal = [infos[i]["terminal_observation"] for i in done]
             # np.array: one C call, where np.stack loops over the rows in Python.
-            final_states = np.array(
-                terminal if tracker.state_key is None else [tracker.states(o) for o in terminal]
-            )
+            final_states = np.array([tracker.states(o) for o in terminal])
             lifted, rewards, lifted_final = tracker.step_lift(
                 obs, dones, final_states, task_rewards, terminated
             )

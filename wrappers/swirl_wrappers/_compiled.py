@@ -5,7 +5,7 @@ the tracker adds more time per env-step than the step of a cheap environment. On
 does the same work. It follows the numpy path line by line: the evaluation is
 :meth:`TaskModel.reward_and_next_batch` on one row (the same ``weights``, summed in another
 order, so results agree up to floating-point rounding), and the shaping is
-``SegmentTracker._shape``. ``tests/test_wrappers_compiled.py`` checks the two paths agree in
+``SegmentTracker._shape``. ``tests/test_wrappers.py`` checks the two paths agree in
 every mode.
 
 ``pip install swirl-wrappers[numba]`` (sb3-swirl installs it); without numba the tracker uses its
@@ -48,7 +48,10 @@ def _evaluate(x, index, t, weights, p, timed, t_bounds):  # pragma: no cover - c
 
 
 def _potential(x, before, reward, after, weights, p, t_bounds):  # pragma: no cover - compiled
-    """``Phi(x, after)`` given ``reward = R_before(x)`` (re-evaluated if the index moved)."""
+    """``Phi(x, after)`` given ``reward = R_before(x)`` (re-evaluated if the index moved).
+
+    The formula is :func:`swirl_wrappers.progress_potential`'s, on one state.
+    """
     if after != before:
         reward = _evaluate(x, after, 0, weights, p, False, t_bounds)[0]
     return after + 1.0 / (1.0 - min(reward, 0.0))

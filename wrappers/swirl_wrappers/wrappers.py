@@ -467,6 +467,7 @@ class SegmentTracker:
         self._uses_task_rewards = self.task_reward_weight != 0.0
         tables = task._tables
         self._weights = np.ascontiguousarray(tables.weights.T)  # a row per output
+        self._linear = tables.linear
         self._t_bounds = np.vstack((tables.t_lo_array, tables.t_hi_array))
         self._config = np.array([task.task_dim, self._timed, self._potential_mode, 0])
         self._config_final = self._config.copy()
@@ -658,7 +659,7 @@ class SegmentTracker:
         potential = np.empty(n) if self._potential_mode else self.potential
         # The kernel reads the leading columns of its task inputs: a linear task's are the
         # observations themselves.
-        linear = self.task._tables.linear
+        linear = self._linear
         try:
             _compiled.step(
                 states if linear else self.task._task_input(states),
@@ -707,23 +708,16 @@ class SegmentTracker:
         task_rewards: Any,
         terminated: Any,
     ) -> None:
+        if self._potential_mode and terminated is None:
+            raise ValueError("reward_mode='potential' needs the terminated flags of each step")
+        if self._uses_task_rewards and task_rewards is None:
+            raise ValueError("task_reward_weight != 0 needs the environment's task_rewards")
         self._check_batch(states, restart, "restart")
-        for name, values, needed in (
-            ("task_rewards", task_rewards, self._uses_task_rewards),
-            ("terminated", terminated, self._potential_mode),
-        ):
-            if not needed:
-                continue
-            if values is None:
-                raise ValueError(
-                    "reward_mode='potential' needs the terminated flags of each step"
-                    if name == "terminated"
-                    else "task_reward_weight != 0 needs the environment's task_rewards"
-                )
-            if np.shape(values) != (self.num_envs,):
-                raise ValueError(
-                    f"{name} must have shape ({self.num_envs},), got {np.shape(values)}"
-                )
+        # Checked only where read: the default mode ignores them.
+        if self._uses_task_rewards:
+            self._check_rows(task_rewards, "task_rewards")
+        if self._potential_mode:
+            self._check_rows(terminated, "terminated")
 
     def _check_final(self, states: np.ndarray, n_rows: int, final_states: Any) -> None:
         if final_states is not None and np.shape(final_states) != (n_rows, *states.shape[1:]):
@@ -738,7 +732,11 @@ class SegmentTracker:
                 f"states must have shape {self._batch_shape} (num_envs, state_dim), "
                 f"got {np.shape(states)}"
             )
-        if rows is not None and np.shape(rows) != (self.num_envs,):
+        if rows is not None:
+            self._check_rows(rows, name)
+
+    def _check_rows(self, rows: Any, name: str) -> None:
+        if np.shape(rows) != (self.num_envs,):
             raise ValueError(f"{name} must have shape ({self.num_envs},), got {np.shape(rows)}")
 
     def _potentials(
