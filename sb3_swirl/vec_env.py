@@ -102,6 +102,7 @@ class SwirlVecEnv(VecEnvWrapper):
         super().__init__(venv, observation_space=tracker.observation_space)
         self.task = task
         self.tracker = tracker
+        self._box = tracker.state_key is None
 
     def reset(self) -> VecEnvObs:
         obs = self.venv.reset()
@@ -122,26 +123,30 @@ class SwirlVecEnv(VecEnvWrapper):
             truncated = [bool(info.get("TimeLimit.truncated")) for info in infos]
             terminated = dones & ~np.array(truncated)
         # nonzero()[0]: a fraction of the cost of np.flatnonzero on small arrays.
-        rows = dones.nonzero()[0]
-        done = rows.tolist()
+        done = dones.nonzero()[0].tolist()
+        # A done row holds the next episode's first observation; the transition ends in
+        # infos[i]["terminal_observation"], lifted with the index the episode ended with.
+        terminal = [infos[i]["terminal_observation"] for i in done]
+        final_states = None
         if done:
-            # A done row holds the next episode's first observation; the transition ends in
-            # infos[i]["terminal_observation"], lifted with the index the episode ended with.
-            terminal = [infos[i]["terminal_observation"] for i in done]
-            # np.array: one C call, where np.stack loops over the rows in Python.
-            final_states = np.array([tracker.states(o) for o in terminal])
-            lifted, rewards, lifted_final = tracker.step_lift(
-                obs, dones, final_states, task_rewards, terminated
+            # np.array: one C call, where np.stack loops over the rows in Python. A Box
+            # observation is its own state.
+            final_states = np.array(
+                terminal if self._box else [tracker.states(o) for o in terminal]
             )
+        rewards32 = np.empty(self.num_envs, dtype=np.float32)  # SB3's reward dtype
+        lifted, rewards, lifted_final = tracker.step_lift(
+            obs, dones, final_states, task_rewards, terminated, float32_rewards=rewards32
+        )
+        if done:
             if lifted_final is None:  # Dict observations
                 lifted_final = [
-                    tracker.lift(o, index)
-                    for o, index in zip(terminal, tracker.ended_index[rows].tolist(), strict=True)
+                    tracker.lift(o, tracker.ended_index[i])
+                    for o, i in zip(terminal, done, strict=True)
                 ]
-            for i, lifted_obs in zip(done, lifted_final, strict=True):
-                infos[i]["terminal_observation"] = lifted_obs
-        else:
-            lifted, rewards, _ = tracker.step_lift(obs, None, None, task_rewards, terminated)
+            # Indexing, not iteration: cheaper on a row or two of an array.
+            for k, i in enumerate(done):
+                infos[i]["terminal_observation"] = lifted_final[k]
         for info, index, task_reward, reward in zip(
             infos,
             tracker.ended_index.tolist(),
@@ -152,4 +157,4 @@ class SwirlVecEnv(VecEnvWrapper):
             info[SEGMENT_KEY] = index
             info["task_reward"] = task_reward
             info["segment_reward"] = reward
-        return lifted, rewards.astype(np.float32), dones, infos
+        return lifted, rewards32, dones, infos

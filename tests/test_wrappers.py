@@ -704,12 +704,34 @@ def test_tracker_refuses_batches_of_the_wrong_shape(backend):
             tracker.step(good, restart=restart, final_states=final)
     # A refused step changes nothing.
     assert tracker.t.tolist() == [0, 0, 0] and tracker.index.tolist() == [0, 0, 0]
+    for rewards32 in (np.zeros(3), np.zeros(2, dtype=np.float32), [0.0, 0.0, 0.0]):
+        with pytest.raises(ValueError, match=r"float32_rewards must be a float32 array of shape"):
+            tracker.step_lift(good, float32_rewards=rewards32)
     weighted = SegmentTracker(task, 3, PointEnv(dim=2).observation_space, task_reward_weight=1.0)
     weighted.reset(good)
     with pytest.raises(ValueError, match=r"task_rewards must have shape \(3,\)"):
         weighted.step(good, task_rewards=np.zeros(2))
     with pytest.raises(ValueError, match="num_envs"):
         SegmentTracker(task, 2.7, PointEnv(dim=2).observation_space)
+
+
+def test_compiled_tracker_refuses_a_corrupted_index_or_potential():
+    """The kernel reads without bounds checks: what a caller can set is checked before it runs."""
+    assert _compiled.step is not None, "numba is missing: pip install swirl-wrappers[numba]"
+    space = PointEnv(dim=2).observation_space
+    states = np.zeros((3, 2), dtype=np.float32)
+    for kwargs, attribute, value, message in (
+        ({}, "index", np.array([0, 7, 0]), "segment index out of range"),
+        ({}, "index", np.array([0, -1, 0]), "segment index out of range"),
+        ({}, "index", np.array([0, 0]), "one entry per environment"),
+        (POTENTIAL_KWARGS, "potential", np.zeros(2), "one entry per environment"),
+    ):
+        tracker = SegmentTracker(plane_task(), 3, space, **kwargs)
+        tracker.reset(states)
+        setattr(tracker, attribute, value)
+        with pytest.raises(ValueError, match=message):
+            tracker.step_lift(states, task_rewards=np.zeros(3), terminated=np.zeros(3, dtype=bool))
+        assert tracker.t.tolist() == [0, 0, 0]  # nothing changed
 
 
 def _tracker_tasks() -> dict[str, tuple[TaskModel, int]]:
@@ -763,9 +785,17 @@ def test_compiled_tracker_matches_its_numpy_path(task_name, kwargs):
             final = rng.normal(size=(int(restart.sum()), dim)).astype(np.float32)
         signals = {"task_rewards": rng.normal(size=n), "terminated": rng.random(n) < 0.2}
         before = compiled.index
-        lifted, rewards, lifted_final = compiled.step_lift(states, restart, final, **signals)
-        expected = reference.step_lift(states, restart, final, **signals)
+        rewards32 = np.full(n, np.nan, dtype=np.float32)
+        lifted, rewards, lifted_final = compiled.step_lift(
+            states, restart, final, **signals, float32_rewards=rewards32
+        )
+        expected32 = np.full(n, np.nan, dtype=np.float32)
+        expected = reference.step_lift(
+            states, restart, final, **signals, float32_rewards=expected32
+        )
         np.testing.assert_allclose(rewards, expected[1], rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(rewards32, rewards.astype(np.float32))
+        np.testing.assert_array_equal(expected32, expected[1].astype(np.float32))
         np.testing.assert_array_equal(lifted, expected[0])
         if final is None:
             assert lifted_final is None and expected[2] is None

@@ -22,22 +22,26 @@ try:
 except ImportError:  # optional: the tracker falls back to numpy
     numba = None
 
-# Layout of the small arrays that carry the tracker's settings into the compiled step.
-P, TIMED, POTENTIAL, HAS_FINAL = range(4)  # int64 ``config``
-SCALE, BONUS, WEIGHT, GAMMA = range(4)  # float64 ``consts``
+# Layout of the float64 ``settings`` array that carries the tracker's settings into the step.
+SCALE, BONUS, WEIGHT, GAMMA, TIMED = range(5)
+
+
+def settings(scale: float, bonus: float, weight: float, gamma: float, timed: bool) -> np.ndarray:
+    """The ``settings`` argument of :func:`step`."""
+    return np.array([scale, bonus, weight, gamma, float(timed)])
 
 
 def _evaluate(x, index, t, weights, p, timed, t_bounds):  # pragma: no cover - compiled
     """``R_index(x)`` and ``M(x, t, index)`` for one state (one row of the batched product)."""
     n_in = weights.shape[1] - 1
+    base = index * 2 * p
     reward = 0.0
     dist = 0.0
     for c in range(2 * p):
-        w = weights[index * 2 * p + c]
         z = 0.0
         for k in range(n_in):
-            z += x[k] * w[k]
-        z += w[n_in]
+            z += x[k] * weights[base + c, k]
+        z += weights[base + c, n_in]
         if c < p:
             reward -= z * z
         else:
@@ -68,22 +72,22 @@ def _lift_row(obs, index, out):  # pragma: no cover - compiled
 
 
 def _step(
-    x,
     obs,
-    final_x,
+    x,
     final_obs,
+    final_x,
     restart,
     before,
     start,
     clock,
     weights,
     t_bounds,
-    config,
-    consts,
+    settings,
     task_rewards,
     terminated,
     potential,
     reward,
+    reward32,
     index,
     new_potential,
     lifted,
@@ -92,34 +96,59 @@ def _step(
     """One tracker step for every row; see ``SegmentTracker.step`` and ``step_lift``.
 
     ``x`` and ``final_x`` hold the task inputs (their leading columns are read) of the
-    observations ``obs`` and of the ``restart`` rows' final observations ``final_obs``.
-    ``restart``, ``final_*``, ``task_rewards``, ``terminated``, ``lifted`` and ``lifted_final``
-    are empty when not given (or not needed). Writes the rewards into ``reward``, the new indices
-    into ``index[0]``, the indices the transitions ended with into ``index[1]``, the potentials
-    (``"potential"`` mode) into ``new_potential`` and the lifted observations into ``lifted``
-    and ``lifted_final``; moves ``start`` of the restarted rows to ``clock``.
+    observations ``obs`` and of the ``restart`` rows' final observations ``final_obs`` (a linear
+    task's are the observations themselves). Writes the rewards into ``reward``
+    (and ``reward32``), the new indices into ``index[0]``, the indices the transitions ended
+    with into ``index[1]``, the potentials into ``new_potential`` and the lifted observations
+    into ``lifted`` and ``lifted_final``; moves ``start`` of the restarted rows to ``clock``.
+
+    Arrays that are not given or not needed are ``None``: ``final_obs`` and ``final_x``
+    without final states (the restart rows made no transition), ``restart`` without restarts,
+    ``task_rewards`` when their weight is 0, ``terminated``, ``potential`` and
+    ``new_potential`` outside ``"potential"`` mode, ``reward32``, ``lifted`` and
+    ``lifted_final`` when not asked for. numba compiles each combination separately, without
+    the branches it does not need; a ``None`` costs less to pass than an empty array.
     """
-    p, timed, potential_mode = config[P], config[TIMED], config[POTENTIAL]
-    has_final = config[HAS_FINAL]
-    scale, bonus, weight, gamma = consts[SCALE], consts[BONUS], consts[WEIGHT], consts[GAMMA]
-    has_restart = len(restart) > 0
-    if has_final and np.count_nonzero(restart) != len(final_x):
-        raise ValueError("final_states must hold one state per restart row")
+    scale, bonus, weight = settings[SCALE], settings[BONUS], settings[WEIGHT]
+    gamma, timed = settings[GAMMA], settings[TIMED] != 0.0
+    n = len(start)
+    n_indices = t_bounds.shape[1]
+    p = len(weights) // (2 * n_indices)
+    # Bounds are not checked per access (that would double the cost). The Python side checks
+    # the shapes of what callers pass; these are what they can reach through the tracker's
+    # attributes, and the count of final states. Checked before anything changes.
+    if len(before) != n or (potential is not None and len(potential) != n):
+        raise ValueError("index and potential must hold one entry per environment")
+    for i in range(n):
+        if before[i] < 0 or before[i] >= n_indices:
+            raise ValueError("index holds a segment index out of range")
+    if final_obs is not None:
+        if restart is None or np.count_nonzero(restart) != len(final_obs):
+            raise ValueError("final_states must hold one state per restart row")
     xi = np.empty(weights.shape[1] - 1)
-    j = 0  # the next row of ``final_x``
-    for i in range(len(before)):
-        restarts = has_restart and restart[i]
-        if restarts and not has_final:
+    j = 0  # the next row of ``final_obs``
+    for i in range(n):
+        restarts = False
+        if restart is not None:
+            restarts = restart[i]
+        if restarts and final_obs is None:
             # NEXT_STEP: the row holds a new episode's first state and made no transition.
             reward[i] = 0.0
+            if reward32 is not None:
+                reward32[i] = 0.0
         else:
             # The transition; at a restart row it ends in the final state of the episode.
             # (A copy: ``final_x`` and ``x`` may differ in dtype or layout.)
-            for k in range(len(xi)):
-                xi[k] = final_x[j, k] if restarts else x[i, k]
+            if restarts:
+                if final_obs is not None:
+                    for k in range(len(xi)):
+                        xi[k] = final_x[j, k]
+            else:
+                for k in range(len(xi)):
+                    xi[k] = x[i, k]
             b = before[i]
             r, after = _evaluate(xi, b, clock - start[i], weights, p, timed, t_bounds)
-            if potential_mode:
+            if potential is not None:
                 phi = 0.0
                 if not terminated[i]:
                     phi = _potential(xi, b, r, after, weights, p, t_bounds)
@@ -129,34 +158,36 @@ def _step(
                 r = r * scale
             if bonus != 0.0:
                 r = r + bonus * (after != b)
-            if weight != 0.0:
+            if task_rewards is not None:
                 r = r + weight * task_rewards[i]
             reward[i] = r
+            if reward32 is not None:
+                reward32[i] = r
             index[0, i] = index[1, i] = after
             if not restarts:
-                if len(lifted):
+                if lifted is not None:
                     _lift_row(obs[i], after, lifted[i])
                 continue
-            if len(lifted_final):
-                _lift_row(final_obs[j], after, lifted_final[j])
+            if final_obs is not None:
+                if lifted_final is not None:
+                    _lift_row(final_obs[j], after, lifted_final[j])
             j += 1
         # A new episode starts at the row's state (index 0 at t = 0, as in reset).
         start[i] = clock
         r, after = _evaluate(x[i], 0, 0, weights, p, timed, t_bounds)
         index[0, i] = after
-        if not has_final:
+        if final_obs is None:
             index[1, i] = after
-        if potential_mode:
+        if potential is not None:
             new_potential[i] = _potential(x[i], 0, r, after, weights, p, t_bounds)
-        if len(lifted):
+        if lifted is not None:
             _lift_row(obs[i], after, lifted[i])
 
 
 if numba is not None:
     _evaluate = numba.njit(cache=True, inline="always")(_evaluate)
     _potential = numba.njit(cache=True, inline="always")(_potential)
-    _lift_row = numba.njit(cache=True)(_lift_row)
-    # boundscheck: a wrong shape or index from a caller is an IndexError, never a stray read.
-    step = numba.njit(cache=True, boundscheck=True)(_step)
+    _lift_row = numba.njit(cache=True, inline="always")(_lift_row)
+    step = numba.njit(cache=True)(_step)
 else:
     step = None

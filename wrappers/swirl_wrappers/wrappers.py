@@ -469,19 +469,16 @@ class SegmentTracker:
         self._weights = np.ascontiguousarray(tables.weights.T)  # a row per output
         self._linear = tables.linear
         self._t_bounds = np.vstack((tables.t_lo_array, tables.t_hi_array))
-        self._config = np.array([task.task_dim, self._timed, self._potential_mode, 0])
-        self._config_final = self._config.copy()
-        self._config_final[_compiled.HAS_FINAL] = 1
-        self._consts = np.array(
-            [self.reward_scale, self.region_bonus, self.task_reward_weight, self.gamma]
+        self._settings = _compiled.settings(
+            self.reward_scale, self.region_bonus, self.task_reward_weight, self.gamma, self._timed
         )
         self._index_shape = (2, self.num_envs)
+        self._rows_shape = (self.num_envs,)
+        self._state_shape = state_space.shape
+        # Modes whose step reads the environment's signals (checked on every step).
+        self._checks_signals = self._potential_mode or self._uses_task_rewards
         self._lifted_dim = state_space.shape[0] + task.n_indices
         self._lift_dtype = self._one_hot.dtype
-        self._no_rows = np.zeros(0, dtype=bool)
-        self._no_floats = np.zeros(0)
-        self._no_final = np.zeros((0, state_space.shape[0]))
-        self._no_lifted = np.zeros((0, self._lifted_dim))
 
     @property
     def t(self) -> np.ndarray:
@@ -601,22 +598,40 @@ class SegmentTracker:
         final_states: np.ndarray | None = None,
         task_rewards: np.ndarray | None = None,
         terminated: np.ndarray | None = None,
+        *,
+        float32_rewards: np.ndarray | None = None,
     ) -> tuple[Any, np.ndarray, np.ndarray | None]:
         """:meth:`step` on a batch of observations, then :meth:`lift` them: the wrappers' step.
 
-        The arguments are :meth:`step`'s, with the observations in place of the states.
+        The arguments are :meth:`step`'s, with the observations in place of the states, and
+        ``float32_rewards``: a float32 array of shape (num_envs,) that also receives the rewards
+        (what SB3 vector envs return), written in the same pass.
         Returns ``(lifted_obs, rewards, lifted_final)``: ``lifted_final`` is ``final_states``
         lifted with the indices their episodes ended with, for Box observations (where the
         final states are the final observations); ``None`` for Dict observations or without
         ``final_states``.
         """
+        if float32_rewards is not None and (
+            not isinstance(float32_rewards, np.ndarray)
+            or float32_rewards.shape != self._rows_shape
+            or float32_rewards.dtype != np.float32
+        ):
+            raise ValueError(
+                f"float32_rewards must be a float32 array of shape ({self.num_envs},), got "
+                f"{type(float32_rewards).__name__} {np.shape(float32_rewards)} of "
+                f"{np.asarray(float32_rewards).dtype}"
+            )
         if not self.compiled or self.state_key is not None:
             rewards = self.step(self.states(obs), restart, final_states, task_rewards, terminated)
+            if float32_rewards is not None:
+                float32_rewards[...] = rewards
             lifted_final = None
             if final_states is not None and restart is not None and self.state_key is None:
                 lifted_final = self.lift(final_states, self.ended_index[restart])
             return self.lift(obs), rewards, lifted_final
-        return self._compiled_step(obs, restart, final_states, task_rewards, terminated, True)
+        return self._compiled_step(
+            obs, restart, final_states, task_rewards, terminated, float32_rewards, True
+        )
 
     def _compiled_step(
         self,
@@ -625,6 +640,7 @@ class SegmentTracker:
         final_states: Any,
         task_rewards: Any,
         terminated: Any,
+        float32_rewards: np.ndarray | None = None,
         lift: bool = False,
     ) -> tuple[Any, np.ndarray, np.ndarray | None]:
         """:meth:`step` (and :meth:`lift`, for Box observations) in one compiled call.
@@ -633,66 +649,66 @@ class SegmentTracker:
         :meth:`step`'s, written for speed: this runs on every step of every vector env.
         """
         states = np.asarray(states)
+        n = self.num_envs
+        final = None
+        if restart is not None:
+            restart = np.asarray(restart)
+            if final_states is not None:
+                final = np.asarray(final_states)
         if (
             states.shape != self._batch_shape
-            or (restart is not None and np.shape(restart) != self._index_shape[1:])
-            or self._uses_task_rewards
-            or self._potential_mode
+            or (restart is not None and restart.shape != self._rows_shape)
+            or self._checks_signals
         ):
             self._check_step(states, restart, task_rewards, terminated)
-        n = self.num_envs
-        config, final, lifted, lifted_final = self._config, self._no_final, self._no_lifted, None
-        if restart is None:
-            restart = self._no_rows
-        elif final_states is not None:
-            final = np.asarray(final_states)
-            if final.ndim != 2 or final.shape[1:] != states.shape[1:]:
-                self._check_final(states, int(np.count_nonzero(restart)), final)
-            config = self._config_final
-            if lift:
-                lifted_final = np.empty((len(final), self._lifted_dim), self._lifted_dtype(final))
+        if final is not None and final.shape[1:] != self._state_shape:
+            self._check_final(states, int(np.count_nonzero(restart)), final)
+        lifted = lifted_final = None
         if lift:
             lifted = np.empty((n, self._lifted_dim), self._lifted_dtype(states))
+            if final is not None:
+                lifted_final = np.empty((len(final), self._lifted_dim), self._lifted_dtype(final))
         reward = np.empty(n)
         # New arrays, not in-place writes: earlier infos may hold the old ones.
         index = np.empty(self._index_shape, dtype=np.int64)
-        potential = np.empty(n) if self._potential_mode else self.potential
+        potential_mode = self._potential_mode
+        potential = np.empty(n) if potential_mode else None
         # The kernel reads the leading columns of its task inputs: a linear task's are the
         # observations themselves.
         linear = self._linear
         try:
             _compiled.step(
-                states if linear else self.task._task_input(states),
                 states,
-                final if linear or not len(final) else self.task._task_input(final),
+                states if linear else self.task._task_input(states),
                 final,
+                final if linear or final is None else self.task._task_input(final),
                 restart,
                 self.index,
                 self._start,
                 self._clock + 1,
                 self._weights,
                 self._t_bounds,
-                config,
-                self._consts,
-                # Only read when the mode needs them (the checks made sure they were given).
-                np.asarray(task_rewards, dtype=np.float64)
-                if self._uses_task_rewards
-                else self._no_floats,
-                np.asarray(terminated, dtype=bool) if self._potential_mode else self._no_rows,
-                self.potential,
+                self._settings,
+                # Only passed when the mode reads them (the checks made sure they were given).
+                np.asarray(task_rewards, dtype=np.float64) if self._uses_task_rewards else None,
+                np.asarray(terminated, dtype=bool) if potential_mode else None,
+                self.potential if potential_mode else None,
                 reward,
+                float32_rewards,
                 index,
                 potential,
                 lifted,
-                self._no_lifted if lifted_final is None else lifted_final,
+                lifted_final,
             )
         except ValueError:  # the kernel counts the restart rows before it changes anything
-            self._check_final(states, int(np.count_nonzero(restart)), final)
+            if final is not None:
+                self._check_final(states, int(np.count_nonzero(restart)), final)
             raise
         self._clock += 1
         self.index = index[0]
         self.ended_index = index[1]
-        self.potential = potential
+        if potential_mode:
+            self.potential = potential
         return lifted, reward, lifted_final
 
     def _lifted_dtype(self, obs: np.ndarray) -> np.dtype:
