@@ -6,9 +6,9 @@ over ``SyncVectorEnv``, 64 sub-envs) add at most 1 microsecond per env-step.
 
 The vector sub-envs are a cheap 4-D env (a few microseconds a step): under 64 CartPoles a 1 us
 difference is ~2% of the step time and lost in the noise of a shared machine; over the cheap env
-it is measured directly. Each sub-env ends an episode every 25 steps, out of phase with the others
-(as real sub-envs are), so about 2.6 sub-envs reset on each vector step and the wrappers' autoreset
-path runs on almost every step.
+it is measured directly. Each sub-env ends an episode every 25 steps (``--episode-length``), out
+of phase with the others (as real sub-envs are), so about 2.6 sub-envs reset on each vector step
+and the wrappers' autoreset path runs on almost every step.
 
 Raw and wrapped runs alternate, repeat after repeat, and the medians are compared, so slow
 phases of a shared machine hit both sides alike.
@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import os
 import timeit
+from functools import partial
 
 import gymnasium as gym
 import numpy as np
@@ -33,6 +34,7 @@ from swirl_wrappers import QuadraticReward, Region, SwirlVectorWrapper, SwirlWra
 ACROBOT_RATIO_TARGET = 1.15
 VECTOR_ADDED_US_TARGET = 1.0
 N_ENVS = 64
+EPISODE_LENGTH = 25
 
 
 def three_region_task(dims: tuple[int, ...], seed: int = 0) -> TaskModel:
@@ -53,7 +55,7 @@ class CheapEnv(gym.Env):
     observation_space = gym.spaces.Box(-5.0, 5.0, (4,), dtype=np.float32)
     action_space = gym.spaces.Discrete(2)
 
-    def __init__(self, episode_length: int = 25) -> None:
+    def __init__(self, episode_length: int = EPISODE_LENGTH) -> None:
         self.episode_length = episode_length
         self._states = np.random.default_rng(0).uniform(-1, 1, (97, 4)).astype(np.float32)
         self._t = 0
@@ -81,8 +83,16 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         default=N_ENVS,
         help=f"sub-envs of the vector wrappers (the target is for {N_ENVS})",
     )
+    parser.add_argument(
+        "--episode-length",
+        type=int,
+        default=EPISODE_LENGTH,
+        help=f"steps per episode of the vector sub-envs (the target is for {EPISODE_LENGTH})",
+    )
     args = parser.parse_args(argv)
-    n_envs = args.num_envs
+    n_envs, episode_length = args.num_envs, args.episode_length
+    if n_envs < 1 or episode_length < 1:
+        parser.error("--num-envs and --episode-length must be at least 1")
     steps, vec_steps, repeats = (200, 20, 5) if args.quick else (500, 100, 31)
     results: dict[str, float] = {}
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
@@ -112,11 +122,11 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     vec_task = three_region_task(dims=(0, 1, 2, 3), seed=1)
 
     def make_envs():
-        return [CheapEnv for _ in range(n_envs)]
+        return [partial(CheapEnv, episode_length) for _ in range(n_envs)]
 
     def verdict(added: float) -> str:
-        if n_envs != N_ENVS:
-            return f"(the target is for {N_ENVS} sub-envs)"
+        if n_envs != N_ENVS or episode_length != EPISODE_LENGTH:
+            return f"(the target is for {N_ENVS} sub-envs, {EPISODE_LENGTH}-step episodes)"
         status = "OK" if added <= VECTOR_ADDED_US_TARGET else "MISSED"
         return f"(target <= {VECTOR_ADDED_US_TARGET} us) {status}"
 
@@ -141,7 +151,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         added = (wrapped - raw) / env_steps * 1e6
         results[name] = added
         print(
-            f"{name}, {n_envs} sub-envs: raw {raw / env_steps * 1e6:.2f} us/env-step, "
+            f"{name}, {n_envs} sub-envs, {episode_length}-step episodes: "
+            f"raw {raw / env_steps * 1e6:.2f} us/env-step, "
             f"added {added:.3f} us/env-step ({wrapped / raw:.3f}x) {verdict(added)}"
         )
     return results
