@@ -17,11 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    import numba
-except ImportError:  # optional: the tracker falls back to numpy
-    numba = None
-
 # Layout of the float64 ``settings`` array that carries the tracker's settings into the step.
 SCALE, BONUS, WEIGHT, GAMMA, TIMED = range(5)
 
@@ -185,10 +180,22 @@ def _step(
             _lift_row(obs[i], after, lifted[i])
 
 
-if numba is not None:
-    _evaluate = numba.njit(cache=True, inline="always")(_evaluate)
-    _potential = numba.njit(cache=True, inline="always")(_potential)
-    _lift_row = numba.njit(cache=True, inline="always")(_lift_row)
-    step = numba.njit(cache=True)(_step)
-else:
-    step = None
+def __getattr__(name: str):
+    """``step``: :func:`_step` compiled, or ``None`` without numba; built on first use.
+
+    Importing numba takes about half a second, which processes that build no tracker (the
+    workers of a ``SubprocVecEnv`` of ``SwirlWrapper`` s, the CLI) do not pay.
+    """
+    if name != "step":
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    try:
+        import numba
+    except ImportError:  # optional: the tracker falls back to numpy
+        compiled = None
+    else:
+        # The helpers are compiled into the step where it calls them by their global names.
+        for helper in ("_evaluate", "_potential", "_lift_row"):
+            globals()[helper] = numba.njit(cache=True, inline="always")(globals()[helper])
+        compiled = numba.njit(cache=True)(_step)
+    globals()["step"] = compiled
+    return compiled
