@@ -605,7 +605,8 @@ class SegmentTracker:
 
         The arguments are :meth:`step`'s, with the observations in place of the states, and
         ``float32_rewards``: a float32 array of shape (num_envs,) that also receives the rewards
-        (what SB3 vector envs return), written in the same pass.
+        (SB3 vector envs return float32 rewards), written in the same pass.
+
         Returns ``(lifted_obs, rewards, lifted_final)``: ``lifted_final`` is ``final_states``
         lifted with the indices their episodes ended with, for Box observations (where the
         final states are the final observations); ``None`` for Dict observations or without
