@@ -102,7 +102,6 @@ class SwirlVecEnv(VecEnvWrapper):
         super().__init__(venv, observation_space=tracker.observation_space)
         self.task = task
         self.tracker = tracker
-        self._box = tracker.state_key is None
 
     def reset(self) -> VecEnvObs:
         obs = self.venv.reset()
@@ -132,7 +131,7 @@ class SwirlVecEnv(VecEnvWrapper):
             # np.array: one C call, where np.stack loops over the rows in Python. A Box
             # observation is its own state.
             final_states = np.array(
-                terminal if self._box else [tracker.states(o) for o in terminal]
+                terminal if tracker.state_key is None else [tracker.states(o) for o in terminal]
             )
         rewards32 = np.empty(self.num_envs, dtype=np.float32)  # SB3's reward dtype
         lifted, rewards, lifted_final = tracker.step_lift(

@@ -753,7 +753,7 @@ class SegmentTracker:
             self._check_rows(rows, name)
 
     def _check_rows(self, rows: Any, name: str) -> None:
-        if np.shape(rows) != (self.num_envs,):
+        if np.shape(rows) != self._rows_shape:
             raise ValueError(f"{name} must have shape ({self.num_envs},), got {np.shape(rows)}")
 
     def _potentials(
