@@ -30,17 +30,20 @@ def _evaluate(x, index, t, weights, p, timed, t_bounds):  # pragma: no cover - c
     """``R_index(x)`` and ``M(x, t, index)`` for one state (one row of the batched product)."""
     n_in = weights.shape[1] - 1
     base = index * 2 * p
+    # Rows base .. base + p - 1 give the reward, the next p the region distance: two loops,
+    # not one with a branch per row.
     reward = 0.0
-    dist = 0.0
-    for c in range(2 * p):
-        z = 0.0
+    for c in range(base, base + p):
+        z = weights[c, n_in]
         for k in range(n_in):
-            z += x[k] * weights[base + c, k]
-        z += weights[base + c, n_in]
-        if c < p:
-            reward -= z * z
-        else:
-            dist += z * z
+            z += x[k] * weights[c, k]
+        reward -= z * z
+    dist = 0.0
+    for c in range(base + p, base + 2 * p):
+        z = weights[c, n_in]
+        for k in range(n_in):
+            z += x[k] * weights[c, k]
+        dist += z * z
     if dist <= 1.0 and (not timed or (t_bounds[0, index] <= t and t <= t_bounds[1, index])):
         return reward, index + 1
     return reward, index

@@ -61,6 +61,8 @@ __all__ = [
 ]
 
 SEGMENT_KEY = "segment"
+# Compared with an array's dtype: several times cheaper than comparing with np.float32.
+_FLOAT32 = np.dtype(np.float32)
 
 
 def lift_observation_space(
@@ -615,7 +617,7 @@ class SegmentTracker:
         if float32_rewards is not None and (
             not isinstance(float32_rewards, np.ndarray)
             or float32_rewards.shape != self._rows_shape
-            or float32_rewards.dtype != np.float32
+            or float32_rewards.dtype != _FLOAT32
         ):
             raise ValueError(
                 f"float32_rewards must be a float32 array of shape ({self.num_envs},), got "
