@@ -11,7 +11,8 @@ of phase with the others (as real sub-envs are), so about 2.6 sub-envs reset on 
 and the wrappers' autoreset path runs on almost every step.
 
 Raw and wrapped runs alternate, repeat after repeat, and the medians are compared, so slow
-phases of a shared machine hit both sides alike.
+phases of a shared machine hit both sides alike. A control line times an SB3 ``VecEnvWrapper``
+that does nothing the same way: what it reads is the noise of the comparison.
 
 Run: ``.venv/bin/python benchmarks/bench_wrappers.py [--quick]``.
 """
@@ -26,7 +27,7 @@ from functools import partial
 import gymnasium as gym
 import numpy as np
 from _timing import side_by_side, stepper, vector_stepper
-from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnvWrapper
 
 from sb3_swirl.vec_env import SwirlVecEnv
 from swirl_wrappers import QuadraticReward, Region, SwirlVectorWrapper, SwirlWrapper, TaskModel
@@ -72,6 +73,16 @@ class CheapEnv(gym.Env):
         self._t = (self._t + 1 + int(action)) % 97
         self._steps += 1
         return self._states[self._t].copy(), 0.0, self._steps >= self.episode_length, False, {}
+
+
+class PassThrough(VecEnvWrapper):
+    """An SB3 ``VecEnvWrapper`` that adds nothing: the control of the vector comparisons."""
+
+    def reset(self):
+        return self.venv.reset()
+
+    def step_wait(self):
+        return self.venv.step_wait()
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
@@ -124,7 +135,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     def make_envs():
         return [partial(CheapEnv, episode_length) for _ in range(n_envs)]
 
-    def verdict(added: float) -> str:
+    def verdict(name: str, added: float) -> str:
+        if name.startswith("control"):
+            return "(a wrapper that does nothing: the noise of this comparison)"
         if n_envs != N_ENVS or episode_length != EPISODE_LENGTH:
             return f"(the target is for {N_ENVS} sub-envs, {EPISODE_LENGTH}-step episodes)"
         status = "OK" if added <= VECTOR_ADDED_US_TARGET else "MISSED"
@@ -135,6 +148,11 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             "SwirlVecEnv(DummyVecEnv)",
             vector_stepper(DummyVecEnv(make_envs()), vec_steps, seed=0),
             vector_stepper(SwirlVecEnv(DummyVecEnv(make_envs()), vec_task), vec_steps, seed=0),
+        ),
+        (
+            "control: PassThrough(DummyVecEnv)",
+            vector_stepper(DummyVecEnv(make_envs()), vec_steps, seed=0),
+            vector_stepper(PassThrough(DummyVecEnv(make_envs())), vec_steps, seed=0),
         ),
         (
             "SwirlVectorWrapper(SyncVectorEnv)",
@@ -153,7 +171,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         print(
             f"{name}, {n_envs} sub-envs, {episode_length}-step episodes: "
             f"raw {raw / env_steps * 1e6:.2f} us/env-step, "
-            f"added {added:.3f} us/env-step ({wrapped / raw:.3f}x) {verdict(added)}"
+            f"added {added:.3f} us/env-step ({wrapped / raw:.3f}x) {verdict(name, added)}"
         )
     return results
 
