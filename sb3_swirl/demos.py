@@ -178,14 +178,23 @@ def as_demonstrations(data: Any, window: int | None = None) -> list[Demonstratio
     if window is not None:
         if int(window) < 1:
             raise ValueError(f"window must be a positive integer, got {window}")
-        need = int(window) + 2
-        for i, demo in enumerate(demos):
-            if len(demo.observations) < need:
-                raise ValueError(
-                    f"demo {i} is shorter than the window: it has {len(demo.observations)} "
-                    f"states, window={window} needs at least {need}"
-                )
+        check_window([demo.observations for demo in demos], int(window))
     return demos
+
+
+def check_window(states: Sequence[np.ndarray], window: int) -> None:
+    """Raise a ``ValueError`` naming the first demonstration too short for ``window``.
+
+    A window of ``window`` steps needs ``window + 2`` states: two windows, so that a transition
+    can show between them.
+    """
+    need = window + 2
+    for i, x in enumerate(states):
+        if len(x) < need:
+            raise ValueError(
+                f"demo {i} is shorter than the window: it has {len(x)} states, "
+                f"window={window} needs at least {need}"
+            )
 
 
 def save_demos(demos: Any, path: str | os.PathLike) -> None:

@@ -30,7 +30,7 @@ from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
 from sb3_swirl._checks import is_finite_real, is_integer
-from sb3_swirl.demos import as_demonstrations
+from sb3_swirl.demos import as_demonstrations, check_window
 from swirl_wrappers import RBFFeatures, Region
 
 Indicator = Callable[[list[np.ndarray], Any], list[np.ndarray]]
@@ -131,8 +131,14 @@ def gmm_indicator(
     -------
     list of int arrays
         Candidate transition steps per demonstration.
+
+    Raises
+    ------
+    ValueError
+        If a demonstration has fewer than ``window + 2`` states.
     """
     rs = check_random_state(random_state)
+    check_window(states, window)
     smooth = window if smooth is None else int(smooth)
     wins = [_windows(x, window) for x in states]
     pooled = np.concatenate(wins)
@@ -187,8 +193,14 @@ def velocity_indicator(
     window : int
     angle_threshold : float
     min_speed : float
+
+    Raises
+    ------
+    ValueError
+        If a demonstration has fewer than ``window + 2`` states.
     """
     del random_state
+    check_window(states, window)
     speeds = np.concatenate([np.linalg.norm(x[window:] - x[:-window], axis=1) for x in states])
     floor = min_speed * float(np.median(speeds)) + 1e-12
     out = []

@@ -12,6 +12,7 @@ from sklearn.kernel_approximation import Nystroem
 from sb3_swirl.demos import Demonstration, make_piecewise_linear_demos
 from sb3_swirl.segmentation import (
     TransitionStateClustering,
+    gmm_indicator,
     segment_boundaries,
     velocity_indicator,
 )
@@ -156,6 +157,15 @@ def test_callable_indicator_and_partial_settings(three_phases):
     tsc = TransitionStateClustering(indicator=strict_angle, random_state=0).fit(demos)
     assert all(len(t) == 0 for t in tsc.transitions_)
     assert len(tsc.regions_) == 1  # only the goal remains
+
+
+@pytest.mark.parametrize("indicator", [gmm_indicator, velocity_indicator])
+def test_partial_indicator_names_a_demo_shorter_than_its_window(three_phases, indicator):
+    demos, _ = three_phases
+    demos = [*demos[:2], demos[2].observations[:10], *demos[3:]]  # 10 states: enough for 3
+    long_window = functools.partial(indicator, window=20)
+    with pytest.raises(ValueError, match="demo 2 is shorter than the window: it has 10 states"):
+        TransitionStateClustering(indicator=long_window, random_state=0).fit(demos)
 
 
 def test_bad_indicator_output_and_parameters_raise_value_error(three_phases):
