@@ -36,6 +36,7 @@ ACROBOT_RATIO_TARGET = 1.15
 VECTOR_ADDED_US_TARGET = 1.0
 N_ENVS = 64
 EPISODE_LENGTH = 25
+CONTROL = "control: PassThrough(DummyVecEnv)"
 
 
 def three_region_task(dims: tuple[int, ...], seed: int = 0) -> TaskModel:
@@ -136,7 +137,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         return [partial(CheapEnv, episode_length) for _ in range(n_envs)]
 
     def verdict(name: str, added: float) -> str:
-        if name.startswith("control"):
+        if name == CONTROL:
             return "(a wrapper that does nothing: the noise of this comparison)"
         if n_envs != N_ENVS or episode_length != EPISODE_LENGTH:
             return f"(the target is for {N_ENVS} sub-envs, {EPISODE_LENGTH}-step episodes)"
@@ -150,7 +151,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             vector_stepper(SwirlVecEnv(DummyVecEnv(make_envs()), vec_task), vec_steps, seed=0),
         ),
         (
-            "control: PassThrough(DummyVecEnv)",
+            CONTROL,
             vector_stepper(DummyVecEnv(make_envs()), vec_steps, seed=0),
             vector_stepper(PassThrough(DummyVecEnv(make_envs())), vec_steps, seed=0),
         ),
