@@ -139,6 +139,8 @@ def _step(
             # The transition; at a restart row it ends in the final state of the episode.
             # (A copy: ``final_x`` and ``x`` may differ in dtype or layout.)
             if restarts:
+                # final_obs is given here; the test (and the one below) lets numba compile the
+                # specialisation where it is None, which never reaches this branch.
                 if final_obs is not None:
                     for k in range(len(xi)):
                         xi[k] = final_x[j, k]
