@@ -120,11 +120,11 @@ def plot_segments(
                     edgecolor=colors[i],
                     alpha=0.25 if fill else 1.0,
                     lw=0 if fill else 2.0,
-                    label=None if fill else f"region {i + 1}",
+                    label=None if fill else f"region {i}",
                 )
             )
     for i in range(task.n_segments):
-        ax.plot([], [], color=colors[i], lw=2, label=f"segment {i + 1}")
+        ax.plot([], [], color=colors[i], lw=2, label=f"segment {i}")
     if any((task.segment_indices(d.observations)[:-1] == task.n_segments).any() for d in demos):
         ax.plot([], [], color=colors[-1], lw=2, label="after the last region")
     names = _axis_names(task)
@@ -161,7 +161,7 @@ def plot_rewards(task: TaskModel, *, path: str | os.PathLike | None = None) -> F
         weight = reward.weight
         limit = float(np.abs(weight).max()) or 1.0
         image = ax.imshow(weight, cmap="RdBu_r", vmin=-limit, vmax=limit)
-        ax.set_title(f"segment {i + 1} → region {i + 1}")
+        ax.set_title(f"segment {i} → region {i}")
         ticks = np.arange(weight.shape[0])
         ax.set_xticks(ticks, names, rotation=45, ha="right", fontsize="small")
         ax.set_yticks(ticks, names, fontsize="small")
