@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 
 _NPZ_FORMAT = "sb3_swirl.demos/1"
+# How .npz archives (zip, or an empty zip) and .npy arrays start.
+_NUMPY_MAGIC = (b"PK\x03\x04", b"PK\x05\x06", b"\x93NUMPY")
 
 
 @dataclass(frozen=True, eq=False)
@@ -234,6 +236,11 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
     """
     name = os.fspath(path)
     try:
+        # np.load takes anything that is neither an archive nor an array for a pickle, and
+        # says so: look at the magic bytes first to say what the file is not.
+        with open(path, "rb") as fh:
+            if not fh.read(6).startswith(_NUMPY_MAGIC):
+                raise ValueError("not a NumPy .npz archive (save_demos writes one)")
         loaded = np.load(path, allow_pickle=False)
     except (OSError, EOFError, ValueError, zipfile.BadZipFile) as exc:
         raise ValueError(f"cannot read demonstrations from {name}: {exc}") from exc

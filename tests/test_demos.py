@@ -196,10 +196,13 @@ def _damaged_demo_files(tmp_path):
     truncated = tmp_path / "truncated.npz"
     truncated.write_bytes(good.read_bytes()[:200])
     np.save(tmp_path / "array.npy", np.zeros((3, 2)))
+    text = tmp_path / "text.npz"
+    text.write_text("obs,0.0,1.0\n")
     nan = data["obs_1"].copy()
     nan[3, 0] = np.nan
     return [
         (truncated, "cannot read demonstrations"),
+        (text, "cannot read demonstrations .*: not a NumPy .npz archive"),
         (tmp_path / "array.npy", "holds a single array"),
         (write("v99.npz", format=np.array("sb3_swirl.demos/99")), "unsupported .* format"),
         (write("count.npz", n_demos=np.array(1)), "unexpected keys"),
