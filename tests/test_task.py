@@ -198,10 +198,22 @@ def _corrupt(text: str) -> str:
         (lambda text: text.replace('"swirl_task"', '"other"'), "'other'"),
     ],
 )
-def test_bad_json_is_a_clear_value_error(make_text, message):
+def test_bad_json_is_a_clear_value_error(make_text, message, tmp_path):
     text = random_task(0).to_json()
     with pytest.raises(ValueError, match=message):
         TaskModel.from_json(make_text(text))
+    path = tmp_path / "task.json"
+    path.write_text(make_text(text))
+    with pytest.raises(ValueError, match=message) as info:  # from a file: named
+        TaskModel.from_json(path)
+    assert str(path) in str(info.value)
+
+
+def test_binary_file_is_a_value_error_naming_it(tmp_path):
+    path = tmp_path / "plot.png"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff")
+    with pytest.raises(ValueError, match=r"cannot read task model file .*plot\.png"):
+        TaskModel.from_json(path)
 
 
 @pytest.mark.parametrize(

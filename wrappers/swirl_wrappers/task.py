@@ -688,23 +688,29 @@ class TaskModel:
         that starts like JSON is parsed as JSON text.
         """
         text = str(source)
+        file = None  # the file read, named in every error
         if (
             isinstance(source, os.PathLike)
             or os.path.isfile(text)
             or not text.lstrip().startswith(("{", "["))
         ):
+            file = os.fspath(source) if isinstance(source, os.PathLike) else text
             try:
-                with open(source, encoding="utf-8") as fh:
+                with open(file, encoding="utf-8") as fh:
                     text = fh.read()
-            except OSError as exc:
-                raise ValueError(f"cannot read task model file {source!s}: {exc}") from exc
+            except (OSError, UnicodeDecodeError) as exc:  # a binary file is not UTF-8
+                raise ValueError(f"cannot read task model file {file}: {exc}") from exc
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise ValueError(
-                f"task model is not valid JSON (corrupted or truncated?): {exc}"
-            ) from exc
-        return cls.from_dict(data)
+            what = "task model" if file is None else f"task model file {file}"
+            raise ValueError(f"{what} is not valid JSON (corrupted or truncated?): {exc}") from exc
+        try:
+            return cls.from_dict(data)
+        except ValueError as exc:
+            if file is None:
+                raise
+            raise ValueError(f"{file}: {exc}") from exc
 
 
 @functools.lru_cache(maxsize=16)
