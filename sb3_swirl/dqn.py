@@ -294,8 +294,9 @@ class SwirlDQN(DQN):
             ("bc_batch_size", bc_batch_size),
             ("inverse_dynamics_steps", inverse_dynamics_steps),
         ):
-            if int(value) < (0 if name == "bc_epochs" else 1):
-                raise ValueError(f"{name} must be a positive integer, got {value}")
+            minimum = 0 if name == "bc_epochs" else 1
+            if not is_integer(value, minimum):
+                raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
         for name, value, positive in (
             ("bc_lr", bc_lr, True),
             ("bc_margin", bc_margin, False),
@@ -306,6 +307,8 @@ class SwirlDQN(DQN):
                 bound = "> 0" if positive else ">= 0"
                 raise ValueError(f"{name} must be a finite number {bound}, got {value!r}")
         _inverse_dynamics_settings(inverse_dynamics_kwargs)  # fail now, not after the steps
+        if task is not None and not isinstance(task, TaskModel):
+            raise ValueError(f"task must be a swirl_wrappers.TaskModel, got {type(task).__name__}")
         n_step = max(int(n_steps), int(dict(replay_buffer_kwargs or {}).get("n_steps", 1)))
         if prefill_replay and (n_step > 1 or optimize_memory_usage):
             raise ValueError(
@@ -385,11 +388,10 @@ class SwirlDQN(DQN):
         if self.task_json is not None and (
             self.task is None or self.task.to_json() != self.task_json
         ):
-            if self.task is not None:
-                warnings.warn(
+            if self.task is not None:  # `load` with an env, as set_env refuses it
+                raise ValueError(
                     "the environment's proxy task differs from the one this model was trained "
-                    "on; the model keeps its own (model.task)",
-                    stacklevel=2,
+                    "with; load without env=, then wrap the env with model.task"
                 )
             self.task = TaskModel.from_json(self.task_json)
         extractor = self.policy_kwargs.get("features_extractor_class")
@@ -680,18 +682,17 @@ class SwirlDQN(DQN):
     def _behaviour_clone(self, demo: dict[str, th.Tensor]) -> dict[str, float]:
         obs, actions = self._demo_obs("obs"), demo["actions"]
         n = len(actions)
-        n_batches = -(-n // self.bc_batch_size)
+        batch_size = min(self.bc_batch_size, n)  # no batch larger than the demo pairs
+        n_batches = -(-n // batch_size)
         gen = self._rng(2)
         optimizer = th.optim.Adam(self.q_net.parameters(), lr=self.bc_lr)
         self.policy.set_training_mode(True)
         loss_value = float("nan")
         for _ in range(self.bc_epochs):
             self.q_net_target.load_state_dict(self.q_net.state_dict())
-            draw = th.multinomial(
-                demo["weights"], n_batches * self.bc_batch_size, True, generator=gen
-            )
+            draw = th.multinomial(demo["weights"], n_batches * batch_size, True, generator=gen)
             losses = []
-            for batch in draw.to(self.device).split(self.bc_batch_size):
+            for batch in draw.to(self.device).split(batch_size):
                 q = self.q_net(obs[batch])
                 a = actions[batch]
                 loss = self._supervised_loss(q, a)

@@ -111,7 +111,7 @@ def test_task_is_found_in_sub_envs_and_must_match():
         SwirlDQN("MlpPolicy", venv, task=other)
 
 
-def test_set_env_refuses_a_different_task():
+def test_set_env_and_load_refuse_a_different_task(tmp_path):
     model = SwirlDQN("MlpPolicy", point_env(), seed=0)
     model.set_env(point_env())  # the same task: fine
     moved = TaskModel(
@@ -120,6 +120,25 @@ def test_set_env_refuses_a_different_task():
     )
     with pytest.raises(ValueError, match="differs"):
         model.set_env(SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 60), moved))
+    model.save(tmp_path / "model.zip")
+    assert SwirlDQN.load(tmp_path / "model.zip", env=point_env()).task.to_json() == model.task_json
+    with pytest.raises(ValueError, match=r"differs .* load without env="):
+        SwirlDQN.load(
+            tmp_path / "model.zip", env=SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 60), moved)
+        )
+
+
+def test_a_batch_larger_than_the_demo_pairs_is_all_of_them():
+    model = SwirlDQN(
+        "MlpPolicy",
+        point_env(),
+        demonstrations=point_demos(2),
+        bc_epochs=2,
+        seed=0,
+        bc_batch_size=10**9,
+    )
+    model.pretrain()
+    assert model._bc_done and 0 < model.bc_n_pairs_ < 10**9
 
 
 @pytest.mark.parametrize(
@@ -131,6 +150,9 @@ def test_set_env_refuses_a_different_task():
         (dict(inverse_dynamics_kwargs={"net_arch": 64}), "net_arch"),
         (dict(inverse_dynamics_kwargs={"lr": -1}), "lr"),
         (dict(inverse_dynamics_kwargs={"layers": [8]}), "unknown"),
+        (dict(bc_epochs=2.7), "bc_epochs must be an integer"),
+        (dict(bc_batch_size="64"), "bc_batch_size must be an integer"),
+        (dict(task="task.json"), "task must be a swirl_wrappers.TaskModel, got str"),
         (dict(prefill_replay=True, n_steps=3), "prefill_replay"),
         (dict(prefill_replay=True, optimize_memory_usage=True, replay_buffer_kwargs={}), "1-step"),
     ],
