@@ -45,11 +45,17 @@ def _record(estimator: Any) -> dict[str, Any]:
     return {"class": type(estimator).__name__, "params": params}
 
 
-def _build(spec: Any, cls: type, kwargs: dict[str, Any], what: str) -> Any:
+def _build(spec: Any, cls: type, kwargs: dict[str, Any], what: str, base: type) -> Any:
+    """``cls(**kwargs)`` from None or a dict of parameters, or a clone of a ``base`` instance."""
     if spec is None:
         return cls(**kwargs)
     if isinstance(spec, dict):
         return cls(**{**spec, **kwargs})
+    if not isinstance(spec, base):
+        raise TypeError(
+            f"{what} must be a {base.__name__}, a dict of parameters or None, "
+            f"got {type(spec).__name__}"
+        )
     if kwargs:
         raise TypeError(
             f"keyword arguments {sorted(kwargs)} cannot be combined with a {what} instance; "
@@ -136,12 +142,14 @@ def fit_task(
         TransitionStateClustering,
         {k: v for k, v in kwargs.items() if k in seg_params},
         "segmentation",
+        TransitionStateClustering,
     )
     learner = _build(
         reward,
         QuadraticRewardLearner,
         {k: v for k, v in kwargs.items() if k in reward_params and k not in seg_params},
         "reward",
+        RewardLearner,
     )
     if random_state is not None:
         segmenter.set_params(random_state=random_state)
@@ -156,7 +164,7 @@ def fit_task(
         )
     if dims is not None:
         index = np.atleast_1d(dims)
-        if index.size and index.dtype.kind not in "iu":
+        if index.ndim != 1 or (index.size and index.dtype.kind not in "iu"):
             raise ValueError(f"dims must be integer indices, got {dims!r}")
         dims = tuple(int(d) for d in index)
         if (

@@ -601,8 +601,16 @@ class TransitionStateClustering(BaseEstimator):
             value = getattr(self, name)
             if not (is_finite_real(value) and ok(value)):
                 raise ValueError(f"{name} must be a finite number {text}, got {value!r}")
-        if not (self.kernel_sigma**2 > 0 and math.isfinite(0.5 / self.kernel_sigma**2)):
-            raise ValueError(f"kernel_sigma is too small: got {self.kernel_sigma!r}")
+        # A product, not **: a float's ** raises OverflowError where * gives inf.
+        sigma2 = float(self.kernel_sigma) * float(self.kernel_sigma)
+        if not (0 < sigma2 < math.inf and math.isfinite(0.5 / sigma2)):
+            raise ValueError(
+                f"kernel_sigma is out of range: its square must be a finite number > 0, "
+                f"got {self.kernel_sigma!r}"
+            )
+        for name in ("use_time", "include_goal"):
+            if not isinstance(getattr(self, name), bool | np.bool_):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.covariance_type not in ("diag", "tied", "spherical", "full"):
             raise ValueError(
                 "covariance_type must be 'diag', 'tied', 'spherical' or 'full', "

@@ -78,6 +78,8 @@ def test_dims_select_state_columns(demos):
     _same_task(task, plain, rtol=1e-9)  # column slices differ from a fresh array in rounding
     with pytest.raises(ValueError, match="dims must be indices"):
         fit_task(wide, dims=[3])
+    with pytest.raises(ValueError, match="dims must be integer indices"):
+        fit_task(wide, dims=[[1, 2]])
 
 
 def test_estimators_and_kwargs_are_routed(demos):
@@ -90,6 +92,10 @@ def test_estimators_and_kwargs_are_routed(demos):
         fit_task(demos, windw=3)
     with pytest.raises(TypeError, match="cannot be combined"):
         fit_task(demos, segmentation=tsc, window=3)
+    with pytest.raises(TypeError, match="segmentation must be a TransitionStateClustering"):
+        fit_task(demos, segmentation="tsc")
+    with pytest.raises(TypeError, match=r"reward must be a RewardLearner, .* got str"):
+        fit_task(demos, reward="quadratic")
 
 
 def test_accepts_npz_paths_and_imitation_trajectories(demos, tmp_path):

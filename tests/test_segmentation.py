@@ -294,6 +294,9 @@ def test_demonstrations_that_do_not_move_are_a_clear_error():
         {"kernel_sigma": None},
         {"kernel_sigma": 1e-170},
         {"kernel_sigma": float("inf")},
+        {"kernel_sigma": 1e200},  # its square overflows
+        {"include_goal": "no"},
+        {"use_time": 1},
         {"concentration": float("inf")},
         {"confidence": "0.9"},
         {"reg_covar": float("nan")},
