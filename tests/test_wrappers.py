@@ -267,6 +267,15 @@ def test_dict_state_key_picks_the_state():
         (lambda: SwirlWrapper(PointEnv(as_dict=True), line_task(), state_key="x"), "not in the"),
         (lambda: SwirlWrapper(PointEnv(), line_task(), reward_scale=np.nan), "reward_scale"),
         (lambda: SwirlWrapper(PointEnv(), line_task(), region_bonus="a"), "region_bonus"),
+        (lambda: SwirlWrapper(PointEnv(), line_task(), region_bonus="1"), "must be a number"),
+        (lambda: SwirlWrapper(PointEnv(), line_task(), reward_scale=True), "must be a number"),
+        (lambda: SwirlWrapper(PointEnv(), line_task(), reward_scale=np.ones(1)), "a number"),
+        (lambda: SwirlWrapper(PointEnv(), line_task(), reward_scale=-1.0), r"reward_scale .* >= 0"),
+        (lambda: SwirlWrapper(PointEnv(), line_task(), region_bonus=-2), r"region_bonus .* >= 0"),
+        (
+            lambda: SwirlWrapper(PointEnv(), line_task(), terminate_on_completion="no"),
+            "terminate_on_completion must be True or False",
+        ),
         (lambda: SwirlWrapper(PointEnv(), "task.json"), "TaskModel"),
     ],
 )
@@ -549,7 +558,7 @@ def tasks_on_points(draw):
         rewards.append(QuadraticReward(rng.uniform(-1.5, 1.5, p), b @ b.T))
     task = TaskModel(regions, rewards, dims=dims)
     kwargs = {
-        "reward_scale": draw(st.floats(-5, 5, allow_nan=False)),
+        "reward_scale": draw(st.floats(0, 5)),
         "region_bonus": draw(st.floats(0, 10)),
         "terminate_on_completion": draw(st.booleans()),
     }

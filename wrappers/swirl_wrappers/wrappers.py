@@ -39,6 +39,7 @@ reward) and ``"segment_reward"`` (the reward the wrapper returns); the reset ``i
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -151,15 +152,15 @@ def _check_state_space(space: gym.Space, task: TaskModel, name: str) -> None:
 def _check_scalars(
     first: float, second: float, names: tuple[str, str] = ("reward_scale", "region_bonus")
 ) -> tuple[float, float]:
+    """The two settings as floats, each a finite real number >= 0 (a negative one would
+    reward moving away from the regions or penalise the task)."""
     values = []
     for name, value in zip(names, (first, second), strict=True):
-        try:
-            value = float(value)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{name} must be a number, got {value!r}") from exc
-        if not math.isfinite(value):
-            raise ValueError(f"{name} must be finite, got {value}")
-        values.append(value)
+        if not isinstance(value, numbers.Real) or isinstance(value, bool):
+            raise ValueError(f"{name} must be a number, got {value!r}")
+        if not (math.isfinite(value) and value >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+        values.append(float(value))
     return values[0], values[1]
 
 
@@ -232,9 +233,9 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     task : TaskModel
         The proxy task; its ``dims`` / features must fit the observation.
     reward_scale : float
-        Multiplies the segment reward.
+        Multiplies the segment reward (>= 0).
     region_bonus : float
-        Added to the reward of a step that reaches the next region.
+        Added to the reward of a step that reaches the next region (>= 0).
     terminate_on_completion : bool
         End the episode (``terminated=True``) when the last region is reached.
     state_key : str, optional
@@ -243,7 +244,7 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         ``"quadratic"``: the paper's segment reward; ``"potential"``: potential-based shaping of
         the environment's reward by segment progress (see the module docstring).
     task_reward_weight : float, optional
-        Weight of the environment's own reward in the returned reward; default 0 for
+        Weight (>= 0) of the environment's own reward in the returned reward; default 0 for
         ``"quadratic"``, 1 for ``"potential"``.
     gamma : float
         Discount of the shaping term in ``"potential"`` mode; set it to the agent's ``gamma``.
@@ -313,6 +314,10 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.reward_mode, self.task_reward_weight, self.gamma = _check_reward_options(
             reward_mode, task_reward_weight, gamma
         )
+        if not isinstance(terminate_on_completion, bool | np.bool_):
+            raise ValueError(
+                f"terminate_on_completion must be True or False, got {terminate_on_completion!r}"
+            )
         self.terminate_on_completion = bool(terminate_on_completion)
         self._one_hot = _one_hot_table(self.observation_space, self._state_key, task.n_indices)
         self.segment = 0
