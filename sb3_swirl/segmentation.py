@@ -806,7 +806,14 @@ class TransitionStateClustering(BaseEstimator):
                     f"the transition indicator returned non-integer or non-1-D indices for "
                     f"demo {i}: dtype {idx.dtype}, shape {idx.shape}"
                 )
-            out.append(_interior(idx.reshape(-1), len(x[i])))
+            n_states = len(x[i])
+            outside = idx[(idx < 0) | (idx >= n_states)] if idx.size else idx
+            if outside.size:
+                raise ValueError(
+                    f"the transition indicator returned steps outside demo {i} (its states are "
+                    f"0 .. {n_states - 1}): {outside[:5].tolist()}"
+                )
+            out.append(_interior(idx.reshape(-1), n_states))
         return out
 
     def _dpgmm_labels(self, feats: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:

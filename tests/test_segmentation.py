@@ -174,6 +174,10 @@ def test_bad_indicator_output_and_parameters_raise_value_error(three_phases):
         TransitionStateClustering(indicator=lambda s, r: [np.array([3])]).fit(demos)
     with pytest.raises(ValueError, match="non-integer"):
         TransitionStateClustering(indicator=lambda s, r: [np.array([3.5])] * len(s)).fit(demos)
+    with pytest.raises(ValueError, match=r"steps outside demo 0 \(its states are 0 \.\. \d+\)"):
+        TransitionStateClustering(indicator=lambda s, r: [np.array([5, 10**6])] * len(s)).fit(demos)
+    with pytest.raises(ValueError, match=r"steps outside demo 0 .*: \[-1\]"):
+        TransitionStateClustering(indicator=lambda s, r: [np.array([-1, 5])] * len(s)).fit(demos)
     with pytest.raises(ValueError, match="indicator must be one of"):
         TransitionStateClustering(indicator="hmm").fit(demos)
     with pytest.raises(ValueError, match="window must be a positive integer"):
