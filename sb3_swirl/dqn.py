@@ -136,6 +136,8 @@ def make_swirl_env(
     >>> import sb3_swirl.envs  # doctest: +SKIP
     >>> venv = make_swirl_env("sb3_swirl/ParallelParking-v0", task, n_envs=2)  # doctest: +SKIP
     """
+    if not is_integer(n_envs, 1):
+        raise ValueError(f"n_envs must be an integer >= 1, got {n_envs!r}")
     wrapper_kwargs = dict(wrapper_kwargs or {})
     if isinstance(env_id_or_env, gym.Env):
         if n_envs != 1:

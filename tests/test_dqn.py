@@ -102,6 +102,9 @@ def test_plain_env_is_rejected_with_a_hint():
 
 def test_task_is_found_in_sub_envs_and_must_match():
     venv = make_swirl_env(lambda: gym.wrappers.TimeLimit(PointEnv(), 60), point_task(), n_envs=2)
+    for n_envs in (0, "2", 1.0):
+        with pytest.raises(ValueError, match=f"n_envs must be an integer >= 1, got {n_envs!r}"):
+            make_swirl_env(lambda: PointEnv(), point_task(), n_envs=n_envs)
     assert find_task(venv).to_json() == point_task().to_json()
     other = TaskModel(
         regions=[Region(mean=[0.0, 0.0], covariance=np.eye(2), threshold=1.0)],
