@@ -13,6 +13,35 @@ from rich.table import Table
 console = Console(stderr=True)
 
 
+def _dims(text: str) -> list[int]:
+    """``--dims 0,1,3``: comma-separated observation dims."""
+    try:
+        return [int(d) for d in text.split(",") if d.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated integers (e.g. 0,1,3), got {text!r}"
+        ) from None
+
+
+def _angles(text: str) -> list[list[int]]:
+    """``--angles 0;0,1``: ';'-separated groups of dims, each summed into one angle."""
+    groups = [_dims(group) for group in text.split(";")]
+    if not all(groups):
+        raise argparse.ArgumentTypeError(f"every ';'-separated group needs a dim, got {text!r}")
+    return groups
+
+
+def _seed(text: str) -> int:
+    """``--seed``: an integer numpy accepts as a seed."""
+    try:
+        seed = int(text)
+    except ValueError:
+        seed = -1
+    if not 0 <= seed < 2**32:
+        raise argparse.ArgumentTypeError(f"expected an integer in [0, 2**32), got {text!r}")
+    return seed
+
+
 def _cmd_demos(args: argparse.Namespace) -> int:
     from sb3_swirl.demos import save_demos
     from sb3_swirl.supervisors import collect_demos
@@ -40,15 +69,11 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     if args.reg_covar is not None:
         segmentation["reg_covar"] = args.reg_covar
     reward = {"metric": args.metric}
-    dims = None if args.dims is None else [int(d) for d in args.dims.split(",") if d]
-    angles = None
-    if args.angles is not None:
-        angles = [[int(i) for i in group.split(",")] for group in args.angles.split(";")]
     with console.status(f"fitting SWIRL on {len(demos)} demos...") as status:
         task = fit_task(
             demos,
-            dims=dims,
-            angles=angles,
+            dims=args.dims,
+            angles=args.angles,
             segmentation=segmentation,
             reward=reward,
             random_state=args.seed,
@@ -82,6 +107,8 @@ def _print_task(task) -> None:
 def _cmd_show(args: argparse.Namespace) -> int:
     from swirl_wrappers import TaskModel
 
+    if args.demos is not None and args.plot is None:
+        raise ValueError("--demos are drawn in DIR/segments.png: give --plot DIR too")
     task = TaskModel.from_json(args.task)
     _print_task(task)
     if args.plot is not None:
@@ -124,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demos", help="generate supervisor demonstrations of a shipped env")
     p.add_argument("env_id", help="e.g. sb3_swirl/ParallelParking-v0")
     p.add_argument("-n", type=int, default=5, help="number of demos (default 5)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_seed, default=0)
     p.add_argument("-o", "--output", required=True, help="output .npz file")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_demos)
@@ -132,7 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("fit", help="fit a SWIRL proxy task to demonstrations")
     p.add_argument("demos", help=".npz file of demonstrations (see `sb3-swirl demos`)")
     p.add_argument("-o", "--output", required=True, help="output task JSON")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_seed, default=0)
     p.add_argument("--indicator", default="gmm", choices=["gmm", "velocity", "linear"])
     p.add_argument("--window", type=int, default=None, help="window length of the indicator")
     p.add_argument("--min-demo-fraction", type=float, default=None)
@@ -145,11 +172,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--metric", default="mahalanobis", choices=["mahalanobis", "euclidean"])
     p.add_argument(
-        "--dims", default=None, help="comma-separated observation dims to use (e.g. 0,1,3)"
+        "--dims", type=_dims, help="comma-separated observation dims to use (e.g. 0,1,3)"
     )
     p.add_argument(
         "--angles",
-        default=None,
+        type=_angles,
         help="angles as sums of observation dims, ';'-separated, used as (cos, sin) "
         "(acrobot: '0;0,1' for theta1 and theta1+theta2; then --dims selects the rest)",
     )
@@ -165,7 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demo", help="the main job: SWIRL vs DQN on a shipped task")
     p.add_argument("task", choices=["parking", "acrobot"])
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_seed, default=0)
     p.add_argument("--n-demos", type=int, default=None)
     p.add_argument("--timesteps", type=int, default=None, help="training steps per method")
     p.add_argument("--out", default="results", help="output folder (default results/)")

@@ -77,6 +77,13 @@ def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
         assert main(["demo", "parking", option, value, "--out", str(out), "-q"]) == 2
         assert option[2:].replace("-", "_") in capsys.readouterr().err
         assert not out.exists()
+    # option values argparse refuses, naming the option
+    for option, value in (("--dims", "a,b"), ("--angles", "0;;1"), ("--seed", "-5")):
+        with pytest.raises(SystemExit):
+            main(["fit", str(demos), "-o", str(tmp_path / "t.json"), option, value])
+        assert f"argument {option}: " in capsys.readouterr().err
+    assert main(["show", str(bad), "--demos", str(demos)]) == 2  # nothing to draw them in
+    assert "--plot" in capsys.readouterr().err
 
 
 def test_every_preset_has_tuned_hyperparameters_for_both_methods():
