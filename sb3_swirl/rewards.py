@@ -11,7 +11,7 @@ exactly the segments an agent will be rewarded on.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -33,11 +33,11 @@ def _resolve(
         return list(segmentation.regions_), segmentation.transform_states
     if isinstance(segmentation, TaskModel):
         return list(segmentation.regions), segmentation.featurize
-    regions = list(segmentation)
+    regions = list(segmentation) if isinstance(segmentation, Iterable) else []
     if not regions or not all(isinstance(r, Region) for r in regions):
         raise ValueError(
             "segmentation must be a fitted TransitionStateClustering, a TaskModel or a "
-            "non-empty sequence of Region"
+            f"non-empty sequence of Region, got {type(segmentation).__name__}"
         )
     if features is None:
         return regions, lambda s: s

@@ -89,6 +89,8 @@ def test_bad_inputs_raise_value_error(fitted):
         QuadraticRewardLearner().fit(demos, TransitionStateClustering())
     with pytest.raises(ValueError, match="sequence of Region"):
         QuadraticRewardLearner().fit(demos, [1, 2])
+    with pytest.raises(ValueError, match="sequence of Region, got NoneType"):
+        QuadraticRewardLearner().fit(demos, None)  # sklearn's fit(X, y=None) habit
     with pytest.raises(ValueError, match="regularization must be a finite positive number"):
         QuadraticRewardLearner(regularization=0).fit(demos, [])
 
