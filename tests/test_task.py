@@ -209,6 +209,14 @@ def test_bad_json_is_a_clear_value_error(make_text, message, tmp_path):
     assert str(path) in str(info.value)
 
 
+def test_metadata_that_json_cannot_write_is_refused_at_construction():
+    task = random_task(0)
+    with pytest.raises(ValueError, match=r"metadata must be JSON-serialisable: .*float32"):
+        TaskModel(task.regions, task.rewards, metadata={"x": np.float32(1.0)})
+    with pytest.raises(ValueError, match="metadata must be a dict, got str"):
+        TaskModel(task.regions, task.rewards, metadata="fitted by hand")
+
+
 def test_binary_file_is_a_value_error_naming_it(tmp_path):
     path = tmp_path / "plot.png"
     path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff")

@@ -416,6 +416,12 @@ class TaskModel:
         object.__setattr__(self, "regions", regions)
         object.__setattr__(self, "rewards", rewards)
         object.__setattr__(self, "dims", dims)
+        if not isinstance(self.metadata, dict):
+            raise ValueError(f"metadata must be a dict, got {type(self.metadata).__name__}")
+        try:  # checked now: a task that to_json cannot write would be lost
+            json.dumps(self.metadata)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"metadata must be JSON-serialisable: {exc}") from exc
         object.__setattr__(self, "metadata", dict(self.metadata))
         object.__setattr__(self, "_tables", _Tables.build(self))
 
