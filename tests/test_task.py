@@ -234,6 +234,8 @@ def test_binary_file_is_a_value_error_naming_it(tmp_path):
         (lambda d: d.update(regions=5), "malformed task model"),
         (lambda d: d["regions"][0].update(threshold="big"), "threshold must be a positive"),
         (lambda d: d["regions"][0].update(mean=[1.0, None, 0.0, 0.0]), "mean"),
+        (lambda d: d["regions"][0].update(mean=[True] * 4), "mean must be real"),
+        (lambda d: d["rewards"][0].update(target=["1.5", 0, 0, 0]), "target must be real"),
         (lambda d: d["rewards"].pop(), "one reward per region"),
         (lambda d: d.update(dims=[0, 1]), "dims selects 2 values"),
         (lambda d: d.update(features={"type": "poly"}), "unknown feature map type"),

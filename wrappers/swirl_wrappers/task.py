@@ -33,9 +33,13 @@ SCHEMA_VERSION = 1
 
 def _as_float_array(value: Any, name: str, ndim: int) -> np.ndarray:
     try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # ragged nesting
         raise ValueError(f"{name} must be numeric, got {value!r}") from exc
+    # Not bools or strings: float() would take true or "1.5" (a hand-edited file) silently.
+    if arr.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must be real numbers, got {value!r}")
+    arr = arr.astype(np.float64, copy=False)
     if arr.ndim != ndim:
         raise ValueError(f"{name} must have {ndim} dimension(s), got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
