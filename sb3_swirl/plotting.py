@@ -46,6 +46,14 @@ def _axis_names(task: TaskModel) -> list[str]:
     return [f"obs[{j}]" for j in range(task.task_dim)]
 
 
+def _check_task(task: Any) -> None:
+    if not isinstance(task, TaskModel):
+        raise ValueError(
+            f"task must be a swirl_wrappers.TaskModel (TaskModel.from_json reads a file), "
+            f"got {type(task).__name__}"
+        )
+
+
 def plot_segments(
     demos: Any,
     task: TaskModel,
@@ -77,6 +85,7 @@ def plot_segments(
     -------
     matplotlib.figure.Figure
     """
+    _check_task(task)
     demos = as_demonstrations(demos)
     a, b = (int(d) for d in dims)
     if task.task_dim < 2 or not (0 <= a < task.task_dim and 0 <= b < task.task_dim and a != b):
@@ -153,6 +162,7 @@ def plot_rewards(task: TaskModel, *, path: str | os.PathLike | None = None) -> F
     matplotlib.figure.Figure
         One heat-map axes per segment, each with its colour bar.
     """
+    _check_task(task)
     k = task.n_segments
     names = _axis_names(task)
     fig = _new_figure((3.2 * k + 0.6, 3.4))

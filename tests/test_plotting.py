@@ -52,3 +52,11 @@ def test_plot_segments_rejects_bad_dims(fitted):
         plot_segments(demos, task, dims=(0, 0))
     with pytest.raises(ValueError, match="two different task-space axes"):
         plot_segments(demos, task, dims=(0, 5))
+
+
+def test_plots_refuse_a_path_in_place_of_a_task(fitted):
+    demos, _ = fitted
+    with pytest.raises(ValueError, match=r"TaskModel.from_json reads a file.*got str"):
+        plot_rewards("task.json")
+    with pytest.raises(ValueError, match="got str"):
+        plot_segments(demos, "task.json")
