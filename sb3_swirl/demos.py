@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 
 _NPZ_FORMAT = "sb3_swirl.demos/1"
+# Larger observations overflow float64 when squared (covariances, quadratic rewards).
+_MAX_MAGNITUDE = 1e150
 # How .npz archives (zip, or an empty zip) and .npy arrays start.
 _NUMPY_MAGIC = (b"PK\x03\x04", b"PK\x05\x06", b"\x93NUMPY")
 
@@ -96,6 +98,14 @@ def _to_demonstration(item: Any, i: int) -> Demonstration:
     bad = _first_bad_step(obs)
     if bad is not None:
         raise ValueError(f"demo {i}: observations contain NaN or inf (first at step {bad})")
+    if obs.dtype.kind == "f":
+        big = np.abs(obs).max(axis=1) > _MAX_MAGNITUDE
+        if big.any():
+            raise ValueError(
+                f"demo {i}: observations reach {np.abs(obs).max():.3g} (first above "
+                f"{_MAX_MAGNITUDE:g} at step {int(np.argmax(big))}): their squares overflow "
+                "float64; rescale them"
+            )
     n_steps = len(obs) - 1
 
     if acts is not None:

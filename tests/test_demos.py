@@ -154,6 +154,10 @@ def _bad(index, array):
             r"demo 1: observations contain NaN or inf \(first at step 3\)",
         ),
         (_bad(3, np.full((6, 2), np.inf)), r"demo 3: .*NaN or inf \(first at step 0\)"),
+        (
+            _bad(1, np.where(np.arange(20).reshape(10, 2) == 9, -1e200, 1.0)),
+            r"demo 1: observations reach 1e\+200 \(first above 1e\+150 at step 4\).*rescale",
+        ),
         (_bad(2, np.zeros((9, 3))), "demo 2 has state dimension 3 but demo 0 has 2"),
         (_bad(1, np.zeros(9)), r"demo 1: observations must be 2-D .*shape \(9,\)"),
         (_bad(0, np.zeros((3, 2, 2))), "demo 0: observations must be 2-D"),
