@@ -19,11 +19,11 @@ from stable_baselines3.dqn.policies import DQNPolicy
 from torch import nn
 from torch.nn import functional as F
 
-from sb3_swirl._checks import is_finite_real, is_integer
 from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.vec_env import SwirlVecEnv
 from swirl_wrappers import SegmentTracker, SwirlWrapper, TaskModel
+from swirl_wrappers._checks import is_finite_real, is_integer
 
 SelfSwirlDQN = TypeVar("SelfSwirlDQN", bound="SwirlDQN")
 

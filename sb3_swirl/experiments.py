@@ -20,7 +20,7 @@ import yaml
 from rich.console import Console
 from rich.table import Table
 
-from sb3_swirl._checks import is_integer
+from swirl_wrappers._checks import is_integer
 
 console = Console(stderr=True)
 

@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from sb3_swirl._checks import is_finite_real
 from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.segmentation import TransitionStateClustering, segment_boundaries
 from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
+from swirl_wrappers._checks import is_finite_real
 
 
 def _resolve(

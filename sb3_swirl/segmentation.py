@@ -29,9 +29,9 @@ from sklearn.mixture import BayesianGaussianMixture, GaussianMixture
 from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
-from sb3_swirl._checks import is_finite_real, is_integer
 from sb3_swirl.demos import as_demonstrations, check_window
 from swirl_wrappers import RBFFeatures, Region
+from swirl_wrappers._checks import is_bool, is_finite_real, is_integer
 
 Indicator = Callable[[list[np.ndarray], Any], list[np.ndarray]]
 
@@ -609,7 +609,7 @@ class TransitionStateClustering(BaseEstimator):
                 f"got {self.kernel_sigma!r}"
             )
         for name in ("use_time", "include_goal"):
-            if not isinstance(getattr(self, name), bool | np.bool_):
+            if not is_bool(getattr(self, name)):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.covariance_type not in ("diag", "tied", "spherical", "full"):
             raise ValueError(

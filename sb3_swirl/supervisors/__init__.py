@@ -21,9 +21,9 @@ import gymnasium as gym
 import numpy as np
 
 import sb3_swirl.envs  # noqa: F401  (registers the sb3_swirl/ env ids)
-from sb3_swirl._checks import is_integer
 from sb3_swirl.demos import Demonstration
 from sb3_swirl.supervisors.acrobot import AcrobotSupervisor
+from swirl_wrappers._checks import is_integer
 
 #: env id -> ``"module:Class"`` of its supervisor, imported on first use
 SUPERVISORS: dict[str, str] = {

@@ -49,6 +49,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from gymnasium.vector.utils import batch_space
 
 from swirl_wrappers import _compiled
+from swirl_wrappers._checks import is_bool, is_integer
 from swirl_wrappers.task import TaskModel
 
 __all__ = [
@@ -314,7 +315,7 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.reward_mode, self.task_reward_weight, self.gamma = _check_reward_options(
             reward_mode, task_reward_weight, gamma
         )
-        if not isinstance(terminate_on_completion, bool | np.bool_):
+        if not is_bool(terminate_on_completion):
             raise ValueError(
                 f"terminate_on_completion must be True or False, got {terminate_on_completion!r}"
             )
@@ -442,7 +443,7 @@ class SegmentTracker:
         self.observation_space, self.state_key = lift_observation_space(
             observation_space, task, state_key
         )
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
+        if not is_integer(num_envs, 1):
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         self.task = task
         self.num_envs = int(num_envs)
