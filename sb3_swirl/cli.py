@@ -110,6 +110,11 @@ def _cmd_show(args: argparse.Namespace) -> int:
     if args.demos is not None and args.plot is None:
         raise ValueError("--demos are drawn in DIR/segments.png: give --plot DIR too")
     task = TaskModel.from_json(args.task)
+    demos = None
+    if args.demos is not None:  # read before anything is printed or written
+        from sb3_swirl.demos import load_demos
+
+        demos = load_demos(args.demos)
     _print_task(task)
     if args.plot is not None:
         from sb3_swirl.plotting import plot_rewards, plot_segments
@@ -118,10 +123,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
         plot_rewards(task, path=out / "rewards.png")
         written = [out / "rewards.png"]
-        if args.demos is not None:
-            from sb3_swirl.demos import load_demos
-
-            plot_segments(load_demos(args.demos), task, path=out / "segments.png")
+        if demos is not None:
+            plot_segments(demos, task, path=out / "segments.png")
             written.append(out / "segments.png")
         console.print("wrote " + ", ".join(str(p) for p in written))
     return 0

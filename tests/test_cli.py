@@ -84,6 +84,13 @@ def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
         assert f"argument {option}: " in capsys.readouterr().err
     assert main(["show", str(bad), "--demos", str(demos)]) == 2  # nothing to draw them in
     assert "--plot" in capsys.readouterr().err
+    task = tmp_path / "task.json"
+    assert main(["fit", str(demos), "-o", str(task), "--reg-covar", "0.1"]) == 0
+    figs = tmp_path / "figs"
+    missing = ["show", str(task), "--plot", str(figs), "--demos", str(tmp_path / "no.npz")]
+    assert main(missing) == 2
+    assert "no.npz" in capsys.readouterr().err
+    assert not figs.exists()  # nothing written before the error
 
 
 def test_every_preset_has_tuned_hyperparameters_for_both_methods():
