@@ -15,9 +15,10 @@ __all__ = ["SwirlVecEnv"]
 class SwirlVecEnv(VecEnvWrapper):
     """Track the SWIRL segment of every sub-environment and return the segment rewards.
 
-    The SB3 counterpart of :class:`swirl_wrappers.SwirlWrapper`, computed for all sub-envs in a
-    few numpy operations (:class:`swirl_wrappers.SegmentTracker`), with the same observations,
-    rewards and ``info`` keys (``"segment"``, ``"task_reward"``, ``"segment_reward"``). SB3
+    The SB3 counterpart of :class:`swirl_wrappers.SwirlWrapper`, computed for all sub-envs at
+    once (:meth:`swirl_wrappers.SegmentTracker.step_lift_infos`: with numba, one compiled call
+    that also reads and writes the info dicts), with the same observations, rewards and
+    ``info`` keys (``"segment"``, ``"task_reward"``, ``"segment_reward"``). SB3
     vector envs reset a sub-env as soon as it is done: the transition's reward is computed on
     ``infos[i]["terminal_observation"]``, which is lifted with the index the episode ended with,
     and the returned observation starts the new episode. The env's own rewards are those the
@@ -114,46 +115,11 @@ class SwirlVecEnv(VecEnvWrapper):
 
     def step_wait(self) -> VecEnvStepReturn:
         obs, task_rewards, dones, infos = self.venv.step_wait()
-        tracker = self.tracker
         terminated = None
-        if tracker.reward_mode == "potential":  # the only mode that reads terminated
+        if self.tracker.reward_mode == "potential":  # the only mode that reads terminated
             # SB3 marks a time-limit end with TimeLimit.truncated; every other done is a
             # termination.
             truncated = [bool(info.get("TimeLimit.truncated")) for info in infos]
             terminated = dones & ~np.array(truncated)
-        # nonzero()[0]: a fraction of the cost of np.flatnonzero on small arrays.
-        done = dones.nonzero()[0].tolist()
-        # A done row holds the next episode's first observation; the transition ends in
-        # infos[i]["terminal_observation"], lifted with the index the episode ended with.
-        terminal = [infos[i]["terminal_observation"] for i in done]
-        final_states = None
-        if done:
-            # np.array: one C call, where np.stack loops over the rows in Python. A Box
-            # observation is its own state.
-            final_states = np.array(
-                terminal if tracker.state_key is None else [tracker.states(o) for o in terminal]
-            )
-        rewards32 = np.empty(self.num_envs, dtype=np.float32)  # SB3's reward dtype
-        lifted, rewards, lifted_final = tracker.step_lift(
-            obs, dones, final_states, task_rewards, terminated, float32_rewards=rewards32
-        )
-        if done:
-            if lifted_final is None:  # Dict observations
-                lifted_final = [
-                    tracker.lift(o, tracker.ended_index[i])
-                    for o, i in zip(terminal, done, strict=True)
-                ]
-            # Indexing, not iteration: cheaper on a row or two of an array.
-            for k, i in enumerate(done):
-                infos[i]["terminal_observation"] = lifted_final[k]
-        for info, index, task_reward, reward in zip(
-            infos,
-            tracker.ended_index.tolist(),
-            task_rewards.tolist(),
-            rewards.tolist(),
-            strict=True,
-        ):
-            info[SEGMENT_KEY] = index
-            info["task_reward"] = task_reward
-            info["segment_reward"] = reward
-        return lifted, rewards32, dones, infos
+        lifted, rewards = self.tracker.step_lift_infos(obs, dones, task_rewards, infos, terminated)
+        return lifted, rewards, dones, infos

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import pickle
+import sys
 import warnings
+from collections import OrderedDict
 from typing import ClassVar
 
 import gymnasium as gym
@@ -818,3 +820,179 @@ def test_compiled_tracker_matches_its_numpy_path(task_name, kwargs):
         moved += int(np.count_nonzero(compiled.ended_index != before))
         restarted += 0 if restart is None else int(restart.sum())
     assert moved >= 5 and restarted >= 20  # the walks reached regions and restarted
+
+
+# ------------------------------------------------ SB3 info dicts: compiled reads and stores
+def _counting_step_infos(monkeypatch) -> list[int]:
+    """The results of every ``_compiled.step_infos`` call from now on."""
+    results: list[int] = []
+    kernel = _compiled.step_infos
+
+    def counted(*args):
+        results.append(kernel(*args))
+        return results[-1]
+
+    monkeypatch.setattr(_compiled, "step_infos", counted)
+    return results
+
+
+def _sb3_infos(restart: np.ndarray, final: np.ndarray) -> list[dict]:
+    """Infos as an SB3 vector env hands them over, with a stale ``"segment"`` to overwrite."""
+    infos = []
+    for i, done in enumerate(restart):
+        info = {"from_env": i, "segment": None}
+        if done:
+            info["terminal_observation"] = final[i].copy()
+        infos.append(info)
+    return infos
+
+
+def _assert_same_step(got, want, got_infos, want_infos):
+    """Same lifted observations and rewards, and infos with the same keys, order and types."""
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_array_equal(a, b)
+        assert a.dtype == b.dtype
+    for g, w in zip(got_infos, want_infos, strict=True):
+        assert list(g) == list(w)
+        for key, value in w.items():
+            if key == "terminal_observation":
+                np.testing.assert_array_equal(g[key], value)
+                assert g[key].dtype == value.dtype
+            else:
+                assert g[key] == value and type(g[key]) is type(value)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("task_name", ["plane", "timed", "dims"])
+@pytest.mark.parametrize(
+    "kwargs",
+    [{}, SWIRL_KWARGS, {"task_reward_weight": 0.3}, POTENTIAL_KWARGS],
+    ids=["plain", "scale-bonus", "task-weight", "potential"],
+)
+def test_step_lift_infos_kernel_matches_its_python_path(kwargs, task_name, dtype, monkeypatch):
+    """The compiled reads and stores of SB3's infos give exactly what the Python path gives."""
+    assert _compiled.step is not None, "numba is missing: pip install swirl-wrappers[numba]"
+    task, dim = _tracker_tasks()[task_name]
+    n = 8
+    space = spaces.Box(-5.0, 5.0, (dim,), dtype=dtype)
+    kernel, python = (SegmentTracker(task, n, space, **kwargs) for _ in range(2))
+    python._infos_kernel = False  # the Python path around the same compiled step
+    results = _counting_step_infos(monkeypatch)
+    rng = np.random.default_rng(3)
+    states = rng.normal(size=(n, dim)).astype(dtype)
+    kernel.reset(states)
+    python.reset(states)
+    restarted = 0
+    for _ in range(60):
+        states = (states + rng.normal(size=(n, dim)) * 0.4).astype(dtype)
+        restart = rng.random(n) < 0.3
+        final = rng.normal(size=(n, dim)).astype(dtype)
+        signals = {
+            "task_rewards": rng.normal(size=n).astype(np.float32),
+            "terminated": restart & (rng.random(n) < 0.5),
+        }
+        got_infos, want_infos = _sb3_infos(restart, final), _sb3_infos(restart, final)
+        got = kernel.step_lift_infos(states, restart, infos=got_infos, **signals)
+        want = python.step_lift_infos(states, restart, infos=want_infos, **signals)
+        _assert_same_step(got, want, got_infos, want_infos)
+        assert got[1].dtype == np.float32
+        for name in ("index", "ended_index", "t", "potential"):
+            np.testing.assert_array_equal(getattr(kernel, name), getattr(python, name))
+        restarted += int(restart.sum())
+    assert results == [_compiled.DONE] * 60 and restarted >= 60
+
+
+def _sb3_step(tracker: SegmentTracker, infos) -> tuple:
+    states = np.array([[0.1, 0.2], [0.5, 0.0], [-1.0, 0.0], [1.0, 0.5]], dtype=np.float32)
+    restart = np.array([True, False, True, False])
+    return tracker.step_lift_infos(states, restart, np.ones(4), infos)
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        "tuple of infos",
+        "dict subclass",
+        "float64 final observation",
+        "list as final observation",
+        "strided final observation",
+        "byte-swapped final observation",
+    ],
+)
+def test_step_lift_infos_leaves_what_its_kernel_does_not_read_to_python(change, monkeypatch):
+    """Infos the kernel does not read stop it before anything changed; Python does the step."""
+    assert _compiled.step is not None, "numba is missing: pip install swirl-wrappers[numba]"
+    space = PointEnv(dim=2).observation_space
+    kernel, python = (SegmentTracker(plane_task(), 4, space) for _ in range(2))
+    python._infos_kernel = False
+    results = _counting_step_infos(monkeypatch)
+    final = np.array([[0.5, 0.0], [0.0, 0.0], [0.5, 0.05], [0.0, 0.0]], dtype=np.float32)
+
+    def infos():
+        infos = _sb3_infos(np.array([True, False, True, False]), final)
+        if change == "dict subclass":
+            infos[3] = OrderedDict(infos[3])
+        elif change == "tuple of infos":
+            infos = tuple(infos)
+        else:
+            infos[2]["terminal_observation"] = {
+                "float64 final observation": final[2].astype(np.float64),
+                "list as final observation": final[2].tolist(),
+                "strided final observation": np.stack((final[2], final[2]), axis=1)[:, 0],
+                "byte-swapped final observation": final[2].astype(">f4"),
+            }[change]
+        return infos
+
+    for tracker in (kernel, python):
+        tracker.reset(np.zeros((4, 2), dtype=np.float32))
+    got_infos, want_infos = infos(), infos()
+    got, want = _sb3_step(kernel, got_infos), _sb3_step(python, want_infos)
+    _assert_same_step(got, want, got_infos, want_infos)
+    # The transition ended in region 0 at the final observation; the next episode starts away.
+    assert got_infos[2]["segment"] == 1 and kernel.index[2] == 0
+    assert results == ([] if change == "tuple of infos" else [_compiled.NOT_HANDLED])
+
+
+@pytest.mark.parametrize("backend_name", ["kernel", "python"])
+def test_step_lift_infos_refuses_bad_infos_before_changing_anything(backend_name):
+    space = PointEnv(dim=2).observation_space
+    tracker = SegmentTracker(plane_task(), 4, space)
+    tracker._infos_kernel = backend_name == "kernel"
+    tracker.reset(np.zeros((4, 2), dtype=np.float32))
+    final = np.zeros((4, 2), dtype=np.float32)
+    restart = np.array([True, False, True, False])
+    missing = _sb3_infos(restart, final)
+    del missing[2]["terminal_observation"]
+    with pytest.raises(KeyError, match="terminal_observation"):
+        _sb3_step(tracker, missing)
+    too_wide = _sb3_infos(restart, np.zeros((4, 3), dtype=np.float32))
+    with pytest.raises(ValueError, match="final_states must hold one state per restart row"):
+        _sb3_step(tracker, too_wide)
+    with pytest.raises(ValueError, match=r"infos must hold one dict per environment \(4\), got 3"):
+        _sb3_step(tracker, _sb3_infos(restart, final)[:3])
+    assert tracker.t.tolist() == [0, 0, 0, 0]
+    assert [info["segment"] for info in missing] == [None] * 4  # nothing was stored
+
+
+def test_step_lift_infos_kernel_keeps_reference_counts():
+    """The kernel's C API calls take and drop references in pairs: nothing leaks or is lost."""
+    assert _compiled.step is not None, "numba is missing: pip install swirl-wrappers[numba]"
+    tracker = SegmentTracker(plane_task(), 4, PointEnv(dim=2).observation_space)
+    tracker.reset(np.zeros((4, 2), dtype=np.float32))
+    final = np.ones((4, 2), dtype=np.float32)
+    infos = _sb3_infos(np.array([True, False, True, False]), final)
+    watched = [*infos, "terminal_observation", "segment", "task_reward", "segment_reward", dict]
+
+    def step():
+        for i in (0, 2):
+            infos[i]["terminal_observation"] = final[i].copy()
+        _sb3_step(tracker, infos)
+
+    step()  # the first step adds the keys to the dicts
+    counts = [sys.getrefcount(obj) for obj in watched]
+    for _ in range(200):
+        step()
+    assert [sys.getrefcount(obj) for obj in watched] == counts
+    # The stored values are referenced by their dict alone (and getrefcount's argument).
+    stored = [sys.getrefcount(infos[0][key]) for key in ("terminal_observation", "task_reward")]
+    assert stored == [2, 2]

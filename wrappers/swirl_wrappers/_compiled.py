@@ -8,6 +8,14 @@ order, so results agree up to floating-point rounding), and the shaping is
 ``SegmentTracker._shape``. ``tests/test_wrappers.py`` checks the two paths agree in
 every mode.
 
+On an SB3 vector env the info dicts cost more than that: reading the final observations out of
+them and storing three keys into each, in Python, takes longer per sub-env than the whole
+compiled step. :func:`step_infos` (``SegmentTracker.step_lift_infos``) does that work in the same
+compiled call through CPython's C API (list and dict access, the buffer protocol), as a C
+extension would, without a build step. Whatever it does not read (a tuple of infos, a dict
+subclass, a final observation of another dtype or layout) stops it before anything changed, and
+the Python path takes over.
+
 ``pip install swirl-wrappers[numba]`` (sb3-swirl installs it); without numba the tracker uses its
 numpy path. Compiled code is cached on disk (numba's ``cache=True``): the first call on a machine
 compiles for a few seconds, later processes load it.
@@ -185,22 +193,374 @@ def _step(
             _lift_row(obs[i], after, lifted[i])
 
 
+# The C API calls of :func:`_step_infos`: module-level functions in numba's ``@intrinsic`` form,
+# made intrinsics on first use (``__getattr__``). Python objects travel as their addresses
+# (``id``, the address in CPython) in int64s; the caller holds every object passed, so they stay
+# alive. A call that fails clears the Python error and reports the failure in its result, so the
+# kernel can leave the work to Python.
+
+
+def _list_item(typingctx, lst, i):  # pragma: no cover - compiled
+    """``PyList_GetItem(lst, i)``, a borrowed reference; 0 if ``lst`` is no list or too short."""
+    from llvmlite import ir
+    from numba import types
+    from numba.core import cgutils
+
+    def codegen(context, builder, signature, args):
+        pyapi = context.get_python_api(builder)
+        item = pyapi.list_getitem(builder.inttoptr(args[0], pyapi.pyobj), args[1])
+        with builder.if_then(cgutils.is_null(builder, item)):
+            pyapi.err_clear()
+        return builder.ptrtoint(item, ir.IntType(64))
+
+    return types.int64(types.int64, types.int64), codegen
+
+
+def _type_of(typingctx, obj):  # pragma: no cover - compiled
+    """The address of ``type(obj)``."""
+    from llvmlite import ir
+    from numba import types
+
+    def codegen(context, builder, signature, args):
+        pyapi = context.get_python_api(builder)
+        cls = pyapi.get_type(builder.inttoptr(args[0], pyapi.pyobj))
+        return builder.ptrtoint(cls, ir.IntType(64))
+
+    return types.int64(types.int64), codegen
+
+
+def _hold(typingctx, obj):  # pragma: no cover - compiled
+    """``Py_INCREF(obj)``: a borrowed reference outlives what the following calls may run."""
+    from numba import types
+
+    def codegen(context, builder, signature, args):
+        pyapi = context.get_python_api(builder)
+        pyapi.incref(builder.inttoptr(args[0], pyapi.pyobj))
+        return context.get_dummy_value()
+
+    return types.none(types.int64), codegen
+
+
+def _release(typingctx, obj):  # pragma: no cover - compiled
+    """``Py_DECREF(obj)``, the end of a :func:`_hold`."""
+    from numba import types
+
+    def codegen(context, builder, signature, args):
+        pyapi = context.get_python_api(builder)
+        pyapi.decref(builder.inttoptr(args[0], pyapi.pyobj))
+        return context.get_dummy_value()
+
+    return types.none(types.int64), codegen
+
+
+def _dict_get(typingctx, d, key):  # pragma: no cover - compiled
+    """``PyDict_GetItem(d, key)``, a borrowed reference; 0 if the key is missing."""
+    from llvmlite import ir
+    from numba import types
+
+    def codegen(context, builder, signature, args):
+        pyapi = context.get_python_api(builder)
+        value = pyapi.dict_getitem(
+            builder.inttoptr(args[0], pyapi.pyobj), builder.inttoptr(args[1], pyapi.pyobj)
+        )
+        return builder.ptrtoint(value, ir.IntType(64))
+
+    return types.int64(types.int64, types.int64), codegen
+
+
+def _copy_buffer(typingctx, obj, out, fmt):  # pragma: no cover - compiled
+    """Copy ``obj`` into the 1-D array ``out`` through the buffer protocol.
+
+    Only a C-contiguous 1-D buffer of ``len(out)`` items of the one-character format ``fmt``
+    (the character code of ``out``'s dtype) is copied; ``False`` otherwise.
+    """
+    from llvmlite import ir
+    from numba import types
+    from numba.core import cgutils
+
+    if not (isinstance(out, types.Array) and out.ndim == 1 and out.layout == "C"):
+        return None  # memcpy needs a contiguous row
+    i8p, i32, i64 = ir.IntType(8).as_pointer(), ir.IntType(32), ir.IntType(64)
+    # CPython's Py_buffer: buf, obj, len, itemsize, readonly, ndim, format, shape, strides,
+    # suboffsets, internal.
+    ssize_p = i64.as_pointer()
+    py_buffer = ir.LiteralStructType(
+        [i8p, i8p, i64, i64, i32, i32, i8p, ssize_p, ssize_p, ssize_p, i8p]
+    )
+    flags = 0x0038 | 0x0004  # PyBUF_C_CONTIGUOUS | PyBUF_FORMAT
+
+    def codegen(context, builder, signature, args):
+        pyapi = context.get_python_api(builder)
+        out = context.make_array(signature.args[1])(context, builder, args[1])
+        (size,) = cgutils.unpack_tuple(builder, out.shape)
+        view = cgutils.alloca_once(builder, py_buffer)
+        get = cgutils.get_or_insert_function(
+            builder.module,
+            ir.FunctionType(i32, [pyapi.pyobj, py_buffer.as_pointer(), i32]),
+            "PyObject_GetBuffer",
+        )
+        release = cgutils.get_or_insert_function(
+            builder.module,
+            ir.FunctionType(ir.VoidType(), [py_buffer.as_pointer()]),
+            "PyBuffer_Release",
+        )
+
+        def field(k):
+            return builder.load(builder.gep(view, [i32(0), i32(k)]))
+
+        copied = cgutils.alloca_once_value(builder, cgutils.false_bit)
+        status = builder.call(get, [builder.inttoptr(args[0], pyapi.pyobj), view, i32(flags)])
+        with builder.if_else(builder.icmp_signed("==", status, i32(0))) as (got, failed):
+            with failed:
+                pyapi.err_clear()
+            with got:
+                fmt_chars, shape = field(6), field(7)
+                one_dim = builder.and_(
+                    builder.icmp_signed("==", field(5), i32(1)),
+                    builder.and_(
+                        cgutils.is_not_null(builder, fmt_chars), cgutils.is_not_null(builder, shape)
+                    ),
+                )
+                with builder.if_then(one_dim):
+                    first = builder.zext(builder.load(fmt_chars), i64)
+                    fits = builder.and_(
+                        builder.icmp_signed("==", builder.load(shape), size),
+                        builder.icmp_signed("==", first, args[2]),
+                    )
+                    with builder.if_then(fits):  # and no second character (no byte order)
+                        second = builder.load(builder.gep(fmt_chars, [i32(1)]))
+                        with builder.if_then(builder.icmp_signed("==", second, second.type(0))):
+                            cgutils.raw_memcpy(
+                                builder, builder.bitcast(out.data, i8p), field(0), field(2), 1
+                            )
+                            builder.store(cgutils.true_bit, copied)
+                builder.call(release, [view])
+        return builder.load(copied)
+
+    return types.boolean(types.int64, out, types.int64), codegen
+
+
+def _set_number(typingctx, d, key, value):  # pragma: no cover - compiled
+    """``d[key] = value`` as a Python int (integer ``value``) or float; ``False`` on a failure."""
+    from numba import types
+    from numba.core import cgutils
+
+    integer = isinstance(value, types.Integer)
+
+    def codegen(context, builder, signature, args):
+        pyapi = context.get_python_api(builder)
+        obj = pyapi.long_from_longlong(args[2]) if integer else pyapi.float_from_double(args[2])
+        stored = cgutils.alloca_once_value(builder, cgutils.false_bit)
+        with builder.if_else(cgutils.is_null(builder, obj)) as (failed, made):
+            with failed:
+                pyapi.err_clear()
+            with made:
+                _store(builder, pyapi, args[0], args[1], obj, stored)
+        return builder.load(stored)
+
+    value_type = types.int64 if integer else types.float64
+    return types.boolean(types.int64, types.int64, value_type), codegen
+
+
+def _set_row(typingctx, d, key, rows, k):  # pragma: no cover - compiled
+    """``d[key] = rows[k]`` (``PySequence_GetItem``: a row view of an array); ``False`` on a
+    failure."""
+    from llvmlite import ir
+    from numba import types
+    from numba.core import cgutils
+
+    def codegen(context, builder, signature, args):
+        pyapi = context.get_python_api(builder)
+        get = cgutils.get_or_insert_function(
+            builder.module,
+            ir.FunctionType(pyapi.pyobj, [pyapi.pyobj, pyapi.py_ssize_t]),
+            "PySequence_GetItem",
+        )
+        row = builder.call(get, [builder.inttoptr(args[2], pyapi.pyobj), args[3]])
+        stored = cgutils.alloca_once_value(builder, cgutils.false_bit)
+        with builder.if_else(cgutils.is_null(builder, row)) as (failed, made):
+            with failed:
+                pyapi.err_clear()
+            with made:
+                _store(builder, pyapi, args[0], args[1], row, stored)
+        return builder.load(stored)
+
+    return types.boolean(types.int64, types.int64, types.int64, types.int64), codegen
+
+
+def _store(builder, pyapi, d, key, obj, stored):  # pragma: no cover - compiled
+    """Code of ``d[key] = obj`` that consumes the new reference ``obj``; success into
+    ``stored``."""
+    status = pyapi.dict_setitem(
+        builder.inttoptr(d, pyapi.pyobj), builder.inttoptr(key, pyapi.pyobj), obj
+    )
+    pyapi.decref(obj)
+    ok = builder.icmp_signed("==", status, status.type(0))
+    with builder.if_then(builder.not_(ok)):
+        pyapi.err_clear()
+    builder.store(ok, stored)
+
+
+# Layout of the int64 ``addresses`` argument of :func:`step_infos`.
+DICT, TERMINAL, SEGMENT, TASK_REWARD, SEGMENT_REWARD = range(5)
+# Results of :func:`step_infos`.
+DONE, NOT_HANDLED, INFOS_UNFINISHED = range(3)
+
+
+def _step_infos(
+    addresses,
+    infos,
+    fmt,
+    obs,
+    restart,
+    final_obs,
+    before,
+    start,
+    clock,
+    weights,
+    t_bounds,
+    settings,
+    task_rewards,
+    terminated,
+    potential,
+    reward,
+    reward32,
+    index,
+    new_potential,
+    lifted,
+    lifted_final,
+    lifted_final_address,
+    env_rewards,
+):  # pragma: no cover - compiled
+    """:func:`_step` of a linear task for an SB3 vector step, reading and writing its infos.
+
+    ``infos`` is the address of the list of the sub-envs' info dicts. The final observations of
+    the ``restart`` rows are copied from their ``"terminal_observation"`` (format ``fmt``, the
+    character code of ``obs``'s dtype) into ``final_obs``; after the step each is replaced by its
+    row of ``lifted_final`` (the array at ``lifted_final_address``), and every info gets
+    ``"segment"`` (``index[1]``), ``"task_reward"`` (``env_rewards``) and ``"segment_reward"``
+    (``reward``). ``addresses`` holds those of ``dict`` and of the four keys.
+
+    Returns ``NOT_HANDLED`` before anything changed when an info is not exactly a ``dict`` or a
+    final observation is missing or not a 1-D C-contiguous array of ``obs``'s dtype and width;
+    ``INFOS_UNFINISHED`` after the step when a store failed (the stores are idempotent: Python
+    can make them all again); ``DONE`` otherwise.
+    """
+    n = len(restart)
+    dict_type = addresses[DICT]
+    m = 0  # final observations copied
+    for i in range(n):
+        info = _list_item(infos, i)
+        if info == 0 or _type_of(info) != dict_type:
+            return NOT_HANDLED
+        if restart[i]:
+            _hold(info)
+            final = _dict_get(info, addresses[TERMINAL])
+            copied = final != 0 and _copy_buffer(final, final_obs[m], fmt)
+            _release(info)
+            if not copied:
+                return NOT_HANDLED
+            m += 1
+    if m:
+        _step(
+            obs,
+            obs,
+            final_obs[:m],
+            final_obs[:m],
+            restart,
+            before,
+            start,
+            clock,
+            weights,
+            t_bounds,
+            settings,
+            task_rewards,
+            terminated,
+            potential,
+            reward,
+            reward32,
+            index,
+            new_potential,
+            lifted,
+            lifted_final[:m],
+        )
+    else:
+        _step(
+            obs,
+            obs,
+            None,
+            None,
+            restart,
+            before,
+            start,
+            clock,
+            weights,
+            t_bounds,
+            settings,
+            task_rewards,
+            terminated,
+            potential,
+            reward,
+            reward32,
+            index,
+            new_potential,
+            lifted,
+            None,
+        )
+    j = 0
+    for i in range(n):
+        info = _list_item(infos, i)
+        if info == 0 or _type_of(info) != dict_type:
+            return INFOS_UNFINISHED
+        # Held: a store can free the value it replaces, and run what that frees.
+        _hold(info)
+        stored = True
+        if restart[i]:
+            stored = _set_row(info, addresses[TERMINAL], lifted_final_address, j)
+            j += 1
+        stored = (
+            stored
+            and _set_number(info, addresses[SEGMENT], index[1, i])
+            and _set_number(info, addresses[TASK_REWARD], env_rewards[i])
+            and _set_number(info, addresses[SEGMENT_REWARD], reward[i])
+        )
+        _release(info)
+        if not stored:
+            return INFOS_UNFINISHED
+    return DONE
+
+
 def __getattr__(name: str):
-    """``step``: :func:`_step` compiled, or ``None`` without numba; built on first use.
+    """``step`` and ``step_infos``: :func:`_step` and :func:`_step_infos` compiled, or ``None``
+    without numba; built on first use.
 
     Importing numba takes about half a second, which processes that build no tracker (the
     workers of a ``SubprocVecEnv`` of ``SwirlWrapper`` s, the CLI) do not pay.
     """
-    if name != "step":
+    if name not in ("step", "step_infos"):
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     try:
         import numba
+        from numba.extending import intrinsic
     except ImportError:  # optional: the tracker falls back to numpy
-        compiled = None
+        step = step_infos = None
     else:
-        # The helpers are compiled into the step where it calls them by their global names.
+        # The helpers are compiled into the kernels where they call them by their global names
+        # (_step_infos calls the compiled _step).
         for helper in ("_evaluate", "_potential", "_lift_row"):
             globals()[helper] = numba.njit(cache=True, inline="always")(globals()[helper])
-        compiled = numba.njit(cache=True)(_step)
-    globals()["step"] = compiled
-    return compiled
+        step = globals()["_step"] = numba.njit(cache=True)(_step)
+        for helper in (
+            "_list_item",
+            "_type_of",
+            "_hold",
+            "_release",
+            "_dict_get",
+            "_copy_buffer",
+            "_set_number",
+            "_set_row",
+        ):
+            globals()[helper] = intrinsic(globals()[helper])
+        step_infos = numba.njit(cache=True)(_step_infos)
+    globals().update(step=step, step_infos=step_infos)
+    return globals()[name]

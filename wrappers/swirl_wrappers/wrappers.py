@@ -63,6 +63,23 @@ __all__ = [
 ]
 
 SEGMENT_KEY = "segment"
+TASK_REWARD_KEY, SEGMENT_REWARD_KEY = "task_reward", "segment_reward"
+# Where an SB3 vector env puts the last observation of an episode it reset in the same step.
+TERMINAL_OBSERVATION_KEY = "terminal_observation"
+# The addresses ``_compiled.step_infos`` stores with (its ``addresses`` layout): module
+# constants, alive as long as the module. An argument, not a global of the kernel: numba would
+# bake a global array into its on-disk cache, and addresses change from process to process.
+_INFO_ADDRESSES = np.array(
+    [
+        id(dict),
+        id(TERMINAL_OBSERVATION_KEY),
+        id(SEGMENT_KEY),
+        id(TASK_REWARD_KEY),
+        id(SEGMENT_REWARD_KEY),
+    ]
+)
+_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
+_BOOL = np.dtype(bool)
 # Compared with an array's dtype: several times cheaper than comparing with np.float32.
 _FLOAT32 = np.dtype(np.float32)
 
@@ -358,8 +375,8 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.task_reward_weight != 0.0:
             reward += self.task_reward_weight * float(task_reward)
         info[SEGMENT_KEY] = self.segment
-        info["task_reward"] = task_reward
-        info["segment_reward"] = reward
+        info[TASK_REWARD_KEY] = task_reward
+        info[SEGMENT_REWARD_KEY] = reward
         lifted = lift_observation(obs, self._one_hot[self.segment], self._state_key)
         return lifted, reward, terminated, truncated, info
 
@@ -487,6 +504,11 @@ class SegmentTracker:
         self._checks_signals = self._potential_mode or self._uses_task_rewards
         self._lifted_dim = state_space.shape[0] + task.n_indices
         self._lift_dtype = self._one_hot.dtype
+        # step_lift_infos's kernel: Box observations of a task without features, whose final
+        # observations it copies into a scratch buffer (replaced for another dtype).
+        self._infos_kernel = self.state_key is None and self._linear
+        self._final_obs = np.empty(self._batch_shape, self._lift_dtype)
+        self._rewards64 = np.empty(self.num_envs)
 
     @property
     def t(self) -> np.ndarray:
@@ -641,6 +663,178 @@ class SegmentTracker:
         return self._compiled_step(
             obs, restart, final_states, task_rewards, terminated, float32_rewards, True
         )
+
+    def step_lift_infos(
+        self,
+        obs: Any,
+        restart: np.ndarray,
+        task_rewards: np.ndarray,
+        infos: list[dict[str, Any]],
+        terminated: np.ndarray | None = None,
+    ) -> tuple[Any, np.ndarray]:
+        """:meth:`step_lift` on a step of an SB3 vector env, reading and writing its ``infos``.
+
+        An SB3 vector env resets a sub-env in the step that ends its episode: a ``restart``
+        row's observation starts the next episode, and the transition ends in
+        ``infos[i]["terminal_observation"]``, which is replaced by its lifted form (with the
+        index the episode ended with). Every info then gets ``"segment"`` (the index the
+        transition ended with), ``"task_reward"`` and ``"segment_reward"`` as Python numbers.
+
+        Parameters
+        ----------
+        obs : array of shape (num_envs, obs_dim), or a dict of arrays
+            The observations of the step (for Dict observation spaces, a dict).
+        restart : bool array of shape (num_envs,)
+            The step's ``dones``.
+        task_rewards : array of shape (num_envs,)
+            The environment's own rewards.
+        infos : list of dict
+            One info dict per sub-env, changed in place.
+        terminated : bool array of shape (num_envs,), optional
+            As in :meth:`step`.
+
+        Returns
+        -------
+        lifted_obs : array or dict of arrays
+            As from :meth:`step_lift`.
+        rewards : float32 ndarray of shape (num_envs,)
+            SB3's reward dtype; ``info["segment_reward"]`` holds the float64 value.
+
+        Notes
+        -----
+        Reading and writing the info dicts in Python costs more per sub-env than the tracker's
+        whole compiled step. With numba, for Box observations of float32 or float64 and a task
+        without features, one compiled call (``swirl_wrappers._compiled.step_infos``) makes the
+        same reads and stores through CPython's C API. Anything else it meets (a tuple of infos,
+        a dict subclass, a final observation of another dtype or shape) leaves the step to
+        the Python path, which gives the same results.
+        """
+        if len(infos) != self.num_envs:
+            raise ValueError(
+                f"infos must hold one dict per environment ({self.num_envs}), got {len(infos)}"
+            )
+        if (
+            self.compiled
+            and self._infos_kernel
+            and type(obs) is np.ndarray
+            and obs.shape == self._batch_shape
+            and obs.dtype in _FLOATS
+            and type(restart) is np.ndarray
+            and restart.shape == self._rows_shape
+            and restart.dtype == _BOOL
+            and type(infos) is list
+            and type(task_rewards) is np.ndarray
+            and task_rewards.shape == self._rows_shape
+            and task_rewards.dtype in _FLOATS
+        ):
+            stepped = self._compiled_step_infos(obs, restart, task_rewards, infos, terminated)
+            if stepped is not None:
+                return stepped
+        restart = np.asarray(restart)
+        self._check_rows(restart, "restart")
+        done = restart.nonzero()[0].tolist()
+        final = [infos[i][TERMINAL_OBSERVATION_KEY] for i in done]
+        final_states = None
+        if done:
+            # np.array: one C call, where np.stack loops over the rows in Python.
+            final_states = np.array(
+                final if self.state_key is None else [self.states(o) for o in final]
+            )
+        rewards32 = np.empty(self.num_envs, dtype=np.float32)
+        lifted, rewards, lifted_final = self.step_lift(
+            obs, restart, final_states, task_rewards, terminated, float32_rewards=rewards32
+        )
+        if done and lifted_final is None:  # Dict observations
+            lifted_final = [
+                self.lift(o, self.ended_index[i]) for o, i in zip(final, done, strict=True)
+            ]
+        self._write_infos(infos, done, lifted_final, task_rewards, rewards)
+        return lifted, rewards32
+
+    def _compiled_step_infos(
+        self,
+        obs: np.ndarray,
+        restart: np.ndarray,
+        task_rewards: np.ndarray,
+        infos: list[dict[str, Any]],
+        terminated: Any,
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """:meth:`step_lift_infos` in one compiled call; ``None`` (nothing changed) where the
+        kernel leaves the step to Python."""
+        if self._checks_signals:
+            self._check_step(obs, restart, task_rewards, terminated)
+        n = self.num_envs
+        dtype = self._lifted_dtype(obs)
+        final_obs = self._final_obs
+        if final_obs.dtype != obs.dtype:
+            final_obs = self._final_obs = np.empty_like(obs)
+        lifted = np.empty((n, self._lifted_dim), dtype)
+        lifted_final = np.empty((n, self._lifted_dim), dtype)  # the first restart.sum() rows
+        rewards32 = np.empty(n, dtype=np.float32)
+        reward = self._rewards64  # read back only into the infos
+        index = np.empty(self._index_shape, dtype=np.int64)
+        potential_mode = self._potential_mode
+        potential = np.empty(n) if potential_mode else None
+        result = _compiled.step_infos(
+            _INFO_ADDRESSES,
+            id(infos),
+            ord(obs.dtype.char),
+            obs,
+            restart,
+            final_obs,
+            self.index,
+            self._start,
+            self._clock + 1,
+            self._weights,
+            self._t_bounds,
+            self._settings,
+            # As in _compiled_step: only passed when the mode reads them.
+            np.asarray(task_rewards, dtype=np.float64) if self._uses_task_rewards else None,
+            np.asarray(terminated, dtype=bool) if potential_mode else None,
+            self.potential if potential_mode else None,
+            reward,
+            rewards32,
+            index,
+            potential,
+            lifted,
+            lifted_final,
+            id(lifted_final),
+            task_rewards,
+        )
+        if result == _compiled.NOT_HANDLED:
+            return None
+        self._clock += 1
+        self.index = index[0]
+        self.ended_index = index[1]
+        if potential_mode:
+            self.potential = potential
+        if result == _compiled.INFOS_UNFINISHED:  # a failed allocation: Python stores them all
+            done = restart.nonzero()[0].tolist()
+            self._write_infos(infos, done, lifted_final, task_rewards, reward)
+        return lifted, rewards32
+
+    def _write_infos(
+        self,
+        infos: list[dict[str, Any]],
+        done: list[int],
+        lifted_final: Any,
+        task_rewards: np.ndarray,
+        rewards: np.ndarray,
+    ) -> None:
+        """The stores of :meth:`step_lift_infos` into ``infos``."""
+        # Indexing, not iteration: cheaper on a row or two of an array.
+        for k, i in enumerate(done):
+            infos[i][TERMINAL_OBSERVATION_KEY] = lifted_final[k]
+        for info, index, task_reward, reward in zip(
+            infos,
+            self.ended_index.tolist(),
+            np.asarray(task_rewards).tolist(),
+            rewards.tolist(),
+            strict=True,
+        ):
+            info[SEGMENT_KEY] = index
+            info[TASK_REWARD_KEY] = task_reward
+            info[SEGMENT_REWARD_KEY] = reward
 
     def _compiled_step(
         self,
@@ -950,8 +1144,8 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
             final_info = infos.setdefault("final_info", {})
             for key, values in (
                 (SEGMENT_KEY, self.tracker.ended_index),
-                ("task_reward", task_rewards),
-                ("segment_reward", rewards),
+                (TASK_REWARD_KEY, task_rewards),
+                (SEGMENT_REWARD_KEY, rewards),
             ):
                 final_info[key] = np.array(values)
                 final_info["_" + key] = done
@@ -960,8 +1154,8 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
             lifted, rewards, _ = self.tracker.step_lift(obs, **env_signals)
         # The tracker never writes into an index array it has published: no copy needed.
         infos[SEGMENT_KEY] = self.tracker.index
-        infos["task_reward"] = np.array(task_rewards)  # the sub-envs reuse their reward buffer
-        infos["segment_reward"] = rewards.copy()
+        infos[TASK_REWARD_KEY] = np.array(task_rewards)  # the sub-envs reuse their reward buffer
+        infos[SEGMENT_REWARD_KEY] = rewards.copy()
         # Masks shared between keys (a copy each costs more than the keys).
         infos["_" + SEGMENT_KEY] = self._all.copy()
         infos["_task_reward"] = infos["_segment_reward"] = (
