@@ -953,6 +953,28 @@ def test_step_lift_infos_leaves_what_its_kernel_does_not_read_to_python(change, 
     assert results == ([] if change == "tuple of infos" else [_compiled.NOT_HANDLED])
 
 
+def test_step_lift_infos_kernel_takes_observations_of_any_order_and_float_dtype(monkeypatch):
+    """Observations of another dtype than the space's, in Fortran order, then in C order."""
+    assert _compiled.step is not None, "numba is missing: pip install swirl-wrappers[numba]"
+    space = PointEnv(dim=2).observation_space  # float32
+    kernel, python = (SegmentTracker(plane_task(), 4, space) for _ in range(2))
+    python._infos_kernel = False
+    results = _counting_step_infos(monkeypatch)
+    for tracker in (kernel, python):
+        tracker.reset(np.zeros((4, 2), dtype=np.float32))
+    rng = np.random.default_rng(0)
+    restart = np.array([True, False, True, False])
+    for order in ("F", "C", "F"):
+        states = np.asarray(rng.normal(size=(4, 2)) * 0.5, order=order)
+        final = rng.normal(size=(4, 2)) * 0.5
+        got_infos, want_infos = _sb3_infos(restart, final), _sb3_infos(restart, final)
+        got = kernel.step_lift_infos(states, restart, np.zeros(4), got_infos)
+        want = python.step_lift_infos(states, restart, np.zeros(4), want_infos)
+        _assert_same_step(got, want, got_infos, want_infos)
+        assert got[0].dtype == np.float64
+    assert results == [_compiled.DONE] * 3
+
+
 @pytest.mark.parametrize("backend_name", ["kernel", "python"])
 def test_step_lift_infos_refuses_bad_infos_before_changing_anything(backend_name):
     space = PointEnv(dim=2).observation_space

@@ -280,19 +280,20 @@ def _copy_buffer(typingctx, obj, out, fmt):  # pragma: no cover - compiled
 
     if not (isinstance(out, types.Array) and out.ndim == 1 and out.layout == "C"):
         return None  # memcpy needs a contiguous row
-    i8p, i32, i64 = ir.IntType(8).as_pointer(), ir.IntType(32), ir.IntType(64)
-    # CPython's Py_buffer: buf, obj, len, itemsize, readonly, ndim, format, shape, strides,
-    # suboffsets, internal.
-    ssize_p = i64.as_pointer()
-    py_buffer = ir.LiteralStructType(
-        [i8p, i8p, i64, i64, i32, i32, i8p, ssize_p, ssize_p, ssize_p, i8p]
-    )
     flags = 0x0038 | 0x0004  # PyBUF_C_CONTIGUOUS | PyBUF_FORMAT
 
     def codegen(context, builder, signature, args):
         pyapi = context.get_python_api(builder)
+        i8p, i32, ssize = ir.IntType(8).as_pointer(), ir.IntType(32), pyapi.py_ssize_t
+        # CPython's Py_buffer: buf, obj, len, itemsize, readonly, ndim, format, shape,
+        # strides, suboffsets, internal.
+        ssize_p = ssize.as_pointer()
+        py_buffer = ir.LiteralStructType(
+            [i8p, i8p, ssize, ssize, i32, i32, i8p, ssize_p, ssize_p, ssize_p, i8p]
+        )
         out = context.make_array(signature.args[1])(context, builder, args[1])
         (size,) = cgutils.unpack_tuple(builder, out.shape)
+        itemsize = ssize(context.get_abi_sizeof(context.get_data_type(signature.args[1].dtype)))
         view = cgutils.alloca_once(builder, py_buffer)
         get = cgutils.get_or_insert_function(
             builder.module,
@@ -322,16 +323,21 @@ def _copy_buffer(typingctx, obj, out, fmt):  # pragma: no cover - compiled
                     ),
                 )
                 with builder.if_then(one_dim):
-                    first = builder.zext(builder.load(fmt_chars), i64)
+                    first = builder.zext(builder.load(fmt_chars), args[2].type)
                     fits = builder.and_(
-                        builder.icmp_signed("==", builder.load(shape), size),
+                        builder.and_(
+                            builder.icmp_signed("==", builder.load(shape), size),
+                            builder.icmp_signed("==", field(3), itemsize),
+                        ),
                         builder.icmp_signed("==", first, args[2]),
                     )
                     with builder.if_then(fits):  # and no second character (no byte order)
                         second = builder.load(builder.gep(fmt_chars, [i32(1)]))
                         with builder.if_then(builder.icmp_signed("==", second, second.type(0))):
+                            # len(out) items of out's size, whatever the exporter's len says
+                            nbytes = builder.mul(size, itemsize)
                             cgutils.raw_memcpy(
-                                builder, builder.bitcast(out.data, i8p), field(0), field(2), 1
+                                builder, builder.bitcast(out.data, i8p), field(0), nbytes, 1
                             )
                             builder.store(cgutils.true_bit, copied)
                 builder.call(release, [view])

@@ -80,8 +80,9 @@ _INFO_ADDRESSES = np.array(
 )
 _FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
 _BOOL = np.dtype(bool)
-# Compared with an array's dtype: several times cheaper than comparing with np.float32.
-_FLOAT32 = np.dtype(np.float32)
+# Compared with an array's dtype: several times cheaper than comparing with np.float32 (and
+# np.empty takes a dtype faster than a type).
+_FLOAT32, _INT64 = np.dtype(np.float32), np.dtype(np.int64)
 
 
 def lift_observation_space(
@@ -503,6 +504,7 @@ class SegmentTracker:
         # Modes whose step reads the environment's signals (checked on every step).
         self._checks_signals = self._potential_mode or self._uses_task_rewards
         self._lifted_dim = state_space.shape[0] + task.n_indices
+        self._lifted_shape = (self.num_envs, self._lifted_dim)
         self._lift_dtype = self._one_hot.dtype
         # step_lift_infos's kernel: Box observations of a task without features, whose final
         # observations it copies into a scratch buffer (replaced for another dtype).
@@ -767,12 +769,13 @@ class SegmentTracker:
         dtype = self._lifted_dtype(obs)
         final_obs = self._final_obs
         if final_obs.dtype != obs.dtype:
-            final_obs = self._final_obs = np.empty_like(obs)
-        lifted = np.empty((n, self._lifted_dim), dtype)
-        lifted_final = np.empty((n, self._lifted_dim), dtype)  # the first restart.sum() rows
-        rewards32 = np.empty(n, dtype=np.float32)
+            # C order: the kernel copies into its rows.
+            final_obs = self._final_obs = np.empty(obs.shape, obs.dtype)
+        lifted = np.empty(self._lifted_shape, dtype)
+        lifted_final = np.empty(self._lifted_shape, dtype)  # the first restart.sum() rows
+        rewards32 = np.empty(self._rows_shape, _FLOAT32)
         reward = self._rewards64  # read back only into the infos
-        index = np.empty(self._index_shape, dtype=np.int64)
+        index = np.empty(self._index_shape, _INT64)
         potential_mode = self._potential_mode
         potential = np.empty(n) if potential_mode else None
         result = _compiled.step_infos(
@@ -868,12 +871,12 @@ class SegmentTracker:
             self._check_final(states, int(np.count_nonzero(restart)), final)
         lifted = lifted_final = None
         if lift:
-            lifted = np.empty((n, self._lifted_dim), self._lifted_dtype(states))
+            lifted = np.empty(self._lifted_shape, self._lifted_dtype(states))
             if final is not None:
                 lifted_final = np.empty((len(final), self._lifted_dim), self._lifted_dtype(final))
         reward = np.empty(n)
         # New arrays, not in-place writes: earlier infos may hold the old ones.
-        index = np.empty(self._index_shape, dtype=np.int64)
+        index = np.empty(self._index_shape, _INT64)
         potential_mode = self._potential_mode
         potential = np.empty(n) if potential_mode else None
         # The kernel reads the leading columns of its task inputs: a linear task's are the
