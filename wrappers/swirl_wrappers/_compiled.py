@@ -349,20 +349,13 @@ def _copy_buffer(typingctx, obj, out, fmt):  # pragma: no cover - compiled
 def _set_number(typingctx, d, key, value):  # pragma: no cover - compiled
     """``d[key] = value`` as a Python int (integer ``value``) or float; ``False`` on a failure."""
     from numba import types
-    from numba.core import cgutils
 
     integer = isinstance(value, types.Integer)
 
     def codegen(context, builder, signature, args):
         pyapi = context.get_python_api(builder)
         obj = pyapi.long_from_longlong(args[2]) if integer else pyapi.float_from_double(args[2])
-        stored = cgutils.alloca_once_value(builder, cgutils.false_bit)
-        with builder.if_else(cgutils.is_null(builder, obj)) as (failed, made):
-            with failed:
-                pyapi.err_clear()
-            with made:
-                _store(builder, pyapi, args[0], args[1], obj, stored)
-        return builder.load(stored)
+        return _store(builder, pyapi, args[0], args[1], obj)
 
     value_type = types.int64 if integer else types.float64
     return types.boolean(types.int64, types.int64, value_type), codegen
@@ -383,28 +376,30 @@ def _set_row(typingctx, d, key, rows, k):  # pragma: no cover - compiled
             "PySequence_GetItem",
         )
         row = builder.call(get, [builder.inttoptr(args[2], pyapi.pyobj), args[3]])
-        stored = cgutils.alloca_once_value(builder, cgutils.false_bit)
-        with builder.if_else(cgutils.is_null(builder, row)) as (failed, made):
-            with failed:
-                pyapi.err_clear()
-            with made:
-                _store(builder, pyapi, args[0], args[1], row, stored)
-        return builder.load(stored)
+        return _store(builder, pyapi, args[0], args[1], row)
 
     return types.boolean(types.int64, types.int64, types.int64, types.int64), codegen
 
 
-def _store(builder, pyapi, d, key, obj, stored):  # pragma: no cover - compiled
-    """Code of ``d[key] = obj`` that consumes the new reference ``obj``; success into
-    ``stored``."""
-    status = pyapi.dict_setitem(
-        builder.inttoptr(d, pyapi.pyobj), builder.inttoptr(key, pyapi.pyobj), obj
-    )
-    pyapi.decref(obj)
-    ok = builder.icmp_signed("==", status, status.type(0))
-    with builder.if_then(builder.not_(ok)):
-        pyapi.err_clear()
-    builder.store(ok, stored)
+def _store(builder, pyapi, d, key, obj):  # pragma: no cover - compiled
+    """Code of ``d[key] = obj`` that consumes the new reference ``obj`` (NULL: the call that
+    made it failed); whether ``obj`` was stored."""
+    from numba.core import cgutils
+
+    stored = cgutils.alloca_once_value(builder, cgutils.false_bit)
+    with builder.if_else(cgutils.is_null(builder, obj)) as (failed, made):
+        with failed:
+            pyapi.err_clear()
+        with made:
+            status = pyapi.dict_setitem(
+                builder.inttoptr(d, pyapi.pyobj), builder.inttoptr(key, pyapi.pyobj), obj
+            )
+            pyapi.decref(obj)
+            ok = builder.icmp_signed("==", status, status.type(0))
+            with builder.if_then(builder.not_(ok)):
+                pyapi.err_clear()
+            builder.store(ok, stored)
+    return builder.load(stored)
 
 
 # Layout of the int64 ``addresses`` argument of :func:`step_infos`.
@@ -467,52 +462,29 @@ def _step_infos(
             if not copied:
                 return NOT_HANDLED
             m += 1
-    if m:
-        _step(
-            obs,
-            obs,
-            final_obs[:m],
-            final_obs[:m],
-            restart,
-            before,
-            start,
-            clock,
-            weights,
-            t_bounds,
-            settings,
-            task_rewards,
-            terminated,
-            potential,
-            reward,
-            reward32,
-            index,
-            new_potential,
-            lifted,
-            lifted_final[:m],
-        )
-    else:
-        _step(
-            obs,
-            obs,
-            None,
-            None,
-            restart,
-            before,
-            start,
-            clock,
-            weights,
-            t_bounds,
-            settings,
-            task_rewards,
-            terminated,
-            potential,
-            reward,
-            reward32,
-            index,
-            new_potential,
-            lifted,
-            None,
-        )
+    # Slices, also when m is 0: then no row restarts and _step reads neither.
+    _step(
+        obs,
+        obs,
+        final_obs[:m],
+        final_obs[:m],
+        restart,
+        before,
+        start,
+        clock,
+        weights,
+        t_bounds,
+        settings,
+        task_rewards,
+        terminated,
+        potential,
+        reward,
+        reward32,
+        index,
+        new_potential,
+        lifted,
+        lifted_final[:m],
+    )
     j = 0
     for i in range(n):
         info = _list_item(infos, i)
