@@ -776,8 +776,7 @@ class SegmentTracker:
         rewards32 = np.empty(self._rows_shape, _FLOAT32)
         reward = self._rewards64  # read back only into the infos
         index = np.empty(self._index_shape, _INT64)
-        potential_mode = self._potential_mode
-        potential = np.empty(n) if potential_mode else None
+        potential = np.empty(n) if self._potential_mode else None
         result = _compiled.step_infos(
             _INFO_ADDRESSES,
             id(infos),
@@ -785,16 +784,7 @@ class SegmentTracker:
             obs,
             restart,
             final_obs,
-            self.index,
-            self._start,
-            self._clock + 1,
-            self._weights,
-            self._t_bounds,
-            self._settings,
-            # As in _compiled_step: only passed when the mode reads them.
-            np.asarray(task_rewards, dtype=np.float64) if self._uses_task_rewards else None,
-            np.asarray(terminated, dtype=bool) if potential_mode else None,
-            self.potential if potential_mode else None,
+            *self._kernel_state(task_rewards, terminated),
             reward,
             rewards32,
             index,
@@ -806,11 +796,7 @@ class SegmentTracker:
         )
         if result == _compiled.NOT_HANDLED:
             return None
-        self._clock += 1
-        self.index = index[0]
-        self.ended_index = index[1]
-        if potential_mode:
-            self.potential = potential
+        self._commit(index, potential)
         if result == _compiled.INFOS_UNFINISHED:  # a failed allocation: Python stores them all
             done = restart.nonzero()[0].tolist()
             self._write_infos(infos, done, lifted_final, task_rewards, reward)
@@ -877,8 +863,7 @@ class SegmentTracker:
         reward = np.empty(n)
         # New arrays, not in-place writes: earlier infos may hold the old ones.
         index = np.empty(self._index_shape, _INT64)
-        potential_mode = self._potential_mode
-        potential = np.empty(n) if potential_mode else None
+        potential = np.empty(n) if self._potential_mode else None
         # The kernel reads the leading columns of its task inputs: a linear task's are the
         # observations themselves.
         linear = self._linear
@@ -889,16 +874,7 @@ class SegmentTracker:
                 final,
                 final if linear or final is None else self.task._task_input(final),
                 restart,
-                self.index,
-                self._start,
-                self._clock + 1,
-                self._weights,
-                self._t_bounds,
-                self._settings,
-                # Only passed when the mode reads them (the checks made sure they were given).
-                np.asarray(task_rewards, dtype=np.float64) if self._uses_task_rewards else None,
-                np.asarray(terminated, dtype=bool) if potential_mode else None,
-                self.potential if potential_mode else None,
+                *self._kernel_state(task_rewards, terminated),
                 reward,
                 float32_rewards,
                 index,
@@ -910,12 +886,33 @@ class SegmentTracker:
             if final is not None:
                 self._check_final(states, int(np.count_nonzero(restart)), final)
             raise
+        self._commit(index, potential)
+        return lifted, reward, lifted_final
+
+    def _kernel_state(self, task_rewards: Any, terminated: Any) -> tuple:
+        """The compiled kernels' arguments from ``before`` to ``potential``: the tracker's state
+        and settings, and the signals of the step, passed only when the mode reads them (the
+        checks made sure they were given)."""
+        potential_mode = self._potential_mode
+        return (
+            self.index,
+            self._start,
+            self._clock + 1,
+            self._weights,
+            self._t_bounds,
+            self._settings,
+            np.asarray(task_rewards, dtype=np.float64) if self._uses_task_rewards else None,
+            np.asarray(terminated, dtype=bool) if potential_mode else None,
+            self.potential if potential_mode else None,
+        )
+
+    def _commit(self, index: np.ndarray, potential: np.ndarray | None) -> None:
+        """Take a compiled step's results: ``index`` (2, num_envs) and the new potentials."""
         self._clock += 1
         self.index = index[0]
         self.ended_index = index[1]
-        if potential_mode:
+        if self._potential_mode:
             self.potential = potential
-        return lifted, reward, lifted_final
 
     def _lifted_dtype(self, obs: np.ndarray) -> np.dtype:
         """The dtype of ``obs`` lifted (that of concatenating it with the one-hot rows)."""
