@@ -1,0 +1,54 @@
+"""Atomic file writes: a reader sees the old file or the new one, never half of one."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterator
+from typing import IO
+
+# Read once at import (os.umask can only be read by setting it): new files get the usual mode.
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | os.PathLike, mode: str = "w") -> Iterator[IO]:
+    """Open a temporary file beside ``path``; on success it replaces ``path`` in one step.
+
+    The data is written to a temporary file in the same folder, flushed to disk, then moved over
+    ``path`` with ``os.replace``. If anything fails before that (an exception, a full disk,
+    Ctrl-C), the temporary file is removed and ``path`` keeps its previous content.
+
+    Parameters
+    ----------
+    path : str or path-like
+    mode : {"w", "wb"}
+        Text (UTF-8) or binary.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "out.txt")
+    >>> with atomic_write(path) as fh:
+    ...     _ = fh.write("done")
+    >>> open(path).read()
+    'done'
+    """
+    if mode not in ("w", "wb"):
+        raise ValueError(f"mode must be 'w' or 'wb', got {mode!r}")
+    path = os.fspath(path)
+    folder, name = os.path.split(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode, encoding="utf-8" if mode == "w" else None) as fh:
+            os.chmod(tmp, 0o666 & ~_UMASK)
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
