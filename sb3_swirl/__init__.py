@@ -17,23 +17,26 @@ from sb3_swirl.demos import (
     to_imitation,
     to_minari,
 )
-from sb3_swirl.dqn import SwirlDQN, make_swirl_env
+from sb3_swirl.dqn import SwirlDQN
 from sb3_swirl.envs import NoisyAcrobotEnv, ParallelParkingEnv
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.fitting import fit_task
+from sb3_swirl.inverse_dynamics import InverseDynamics
 from sb3_swirl.plotting import plot_rewards, plot_segments
 from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
 from sb3_swirl.segmentation import TransitionStateClustering
 from sb3_swirl.supervisors import collect_demos
-from sb3_swirl.vec_env import SwirlVecEnv
-from swirl_wrappers import SwirlVectorWrapper, SwirlWrapper, TaskModel
+from sb3_swirl.vec_env import SwirlVecEnv, get_swirl_attr, make_swirl_env
+from swirl_wrappers import RewardConfig, SwirlVectorWrapper, SwirlWrapper, TaskModel
 
 __all__ = [
     "Demonstration",
+    "InverseDynamics",
     "NoisyAcrobotEnv",
     "ParallelParkingEnv",
     "QuadraticRewardLearner",
     "RBFFeaturesExtractor",
+    "RewardConfig",
     "RewardLearner",
     "SegmentProgressCallback",
     "SwirlDQN",
@@ -46,6 +49,7 @@ __all__ = [
     "as_demonstrations",
     "collect_demos",
     "fit_task",
+    "get_swirl_attr",
     "load_demos",
     "make_swirl_env",
     "plot_rewards",

@@ -17,6 +17,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
+from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.vec_env import (
     VecEnv,
     VecNormalize,
@@ -24,7 +25,8 @@ from stable_baselines3.common.vec_env import (
     unwrap_vec_normalize,
 )
 
-from sb3_swirl.dqn import find_task
+from sb3_swirl.vec_env import get_swirl_attr
+from swirl_wrappers._io import atomic_write
 
 
 def _original_rewards(env: VecNormalize | None, rewards: np.ndarray) -> np.ndarray:
@@ -41,27 +43,23 @@ def _success_rate(episodes: Iterable[dict]) -> float:
 
 
 class _EpisodeTracker:
-    """Per-env running sums of the true and the step reward; a summary of each finished episode."""
+    """Per-env running sums of the true reward; a summary of each finished episode."""
 
     def __init__(self, n_envs: int) -> None:
         self.returns = np.zeros(n_envs)
-        self.rewards = np.zeros(n_envs)
-        self.lengths = np.zeros(n_envs, dtype=int)
 
     def step(self, i: int, reward: float, done: bool, info: dict[str, Any]) -> dict | None:
+        """Add a step of sub-env ``i``; ``reward`` is the true reward where ``info`` has no
+        ``"task_reward"``. Returns the episode's summary when ``done`` ends it."""
         self.returns[i] += float(info.get("task_reward", reward))
-        self.rewards[i] += float(reward)
-        self.lengths[i] += 1
         if not done:
             return None
         summary = {
             "task_return": float(self.returns[i]),
-            "reward": float(self.rewards[i]),
-            "length": int(self.lengths[i]),
             "segment": info.get("segment"),
             "is_success": info.get("is_success"),
         }
-        self.returns[i] = self.rewards[i] = self.lengths[i] = 0
+        self.returns[i] = 0.0
         return summary
 
 
@@ -107,7 +105,7 @@ class SegmentProgressCallback(BaseCallback):
     def _init_callback(self) -> None:
         if self.n_segments is None:
             try:
-                self.n_segments = find_task(self.training_env).n_segments
+                self.n_segments = get_swirl_attr(self.training_env, "task").n_segments
             except ValueError:
                 self.n_segments = 0  # not a SWIRL env: success and return only
         # learn() resets the env (a new _last_obs) unless it goes on with reset_num_timesteps=False:
@@ -152,37 +150,31 @@ class SegmentProgressCallback(BaseCallback):
 
 
 class TaskEvalCallback(EvalCallback):
-    """``EvalCallback`` scored on the true task: success rate first, then true return.
+    """SB3's ``EvalCallback`` scored on the true task: success rate first, then true return.
 
-    Every ``eval_freq`` calls it runs ``n_eval_episodes`` episodes on ``eval_env`` and logs
-    ``eval/success_rate``, ``eval/task_return`` (mean undiscounted ``info["task_reward"]``),
+    Every ``eval_freq`` calls it runs :func:`~stable_baselines3.common.evaluation.evaluate_policy`
+    for ``n_eval_episodes`` episodes on ``eval_env`` and logs ``eval/success_rate``,
+    ``eval/task_return`` (mean undiscounted ``info["task_reward"]``, the env's own reward) and
     ``eval/final_segment_mean`` (SWIRL envs) besides SB3's ``eval/mean_reward`` (the proxy
     return) and ``eval/mean_ep_length``. The best model (highest success rate, ties broken by
-    true return) goes to ``best_model_save_path/best_model.zip``.
+    true return) goes to ``best_model_save_path/best_model.zip``. Episodes are counted as
+    ``evaluate_policy`` counts them (by ``Monitor`` when the env has one).
 
     History, one entry per evaluation: ``evaluations_timesteps``, ``evaluations_episodes``
     (training episodes finished so far: the paper's "rollouts"), ``success_rates``,
     ``task_returns``, ``evaluations_results`` / ``evaluations_length`` (proxy returns and
-    lengths per episode), ``evaluations_task_returns`` / ``evaluations_successes`` per
-    episode (``n_eval_episodes`` entries each; an episode end without ``info["is_success"]``
-    is a failure, and the success rate is NaN when no episode reports it) and
-    ``evaluations_final_segments`` (SWIRL envs). With ``log_path`` it is saved to
-    ``log_path/evaluations.npz`` after every evaluation.
-
-    The episodes are counted and scored from the steps of ``eval_env`` (every ``done`` ends
-    one), not by a ``Monitor``, so the order of the wrappers does not matter; rewards are
-    taken before ``VecNormalize``.
+    lengths per episode), ``evaluations_successes`` / ``evaluations_task_returns`` /
+    ``evaluations_final_segments`` per episode (an episode end without ``info["is_success"]``
+    is a failure; the success rate is NaN when no episode reports it). With ``log_path`` they
+    are saved to ``log_path/evaluations.npz`` after every evaluation.
 
     Parameters
     ----------
     eval_env : gymnasium.Env or VecEnv
         Wrapped like the training env.
     n_eval_episodes, eval_freq, log_path, best_model_save_path, deterministic, render, verbose,
-    callback_on_new_best, callback_after_eval :
+    warn, callback_on_new_best, callback_after_eval :
         As in :class:`stable_baselines3.common.callbacks.EvalCallback`.
-    warn : bool
-        Accepted for compatibility with ``EvalCallback``; unused, since no ``Monitor`` is
-        needed.
 
     Examples
     --------
@@ -225,33 +217,25 @@ class TaskEvalCallback(EvalCallback):
         self.task_returns: list[float] = []
         self.evaluations_task_returns: list[list[float]] = []
         self.evaluations_final_segments: list[list[int]] = []
+        self._episodes: list[dict] = []
+        self._sums = _EpisodeTracker(self.eval_env.num_envs)
 
-    def _evaluate(self) -> list[dict]:
-        """Summaries of ``n_eval_episodes`` episodes, split over the sub-envs as SB3 does."""
-        env, n_envs = self.eval_env, self.eval_env.num_envs
-        targets = np.array([(self.n_eval_episodes + i) // n_envs for i in range(n_envs)])
-        counts = np.zeros(n_envs, dtype=int)
-        tracker = _EpisodeTracker(n_envs)
-        vec_normalize = unwrap_vec_normalize(env)
-        episodes: list[dict] = []
-        obs, states, episode_starts = env.reset(), None, np.ones(n_envs, dtype=bool)
-        while (counts < targets).any():
-            actions, states = self.model.predict(
-                obs,  # type: ignore[arg-type]
-                state=states,
-                episode_start=episode_starts,
-                deterministic=self.deterministic,
+    def _log_success_callback(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
+        """Called by ``evaluate_policy`` for every sub-env after every step: sums the true
+        reward and records each episode that ``evaluate_policy`` counts."""
+        i, info, done = locals_["i"], locals_["info"], bool(locals_["done"])
+        # Read where info has no "task_reward" (not a SWIRL env): the step reward is the task's.
+        rewards = _original_rewards(unwrap_vec_normalize(self.eval_env), locals_["rewards"])
+        counted = done and (not locals_["is_monitor_wrapped"] or "episode" in info)
+        if done and not counted and "segment" in info:
+            raise ValueError(
+                "the eval env's Monitor sits inside the SWIRL wrapper, which ended an episode "
+                "(terminate_on_completion) that the Monitor never saw; put Monitor outside: "
+                "make_swirl_env(env_id, task, wrapper_kwargs=...) does"
             )
-            obs, rewards, episode_starts, infos = env.step(actions)
-            rewards = _original_rewards(vec_normalize, rewards)
-            for i in np.flatnonzero(counts < targets):
-                summary = tracker.step(i, rewards[i], bool(episode_starts[i]), infos[i])
-                if summary is not None:
-                    episodes.append(summary)
-                    counts[i] += 1
-            if self.render:
-                env.render()
-        return episodes
+        summary = self._sums.step(i, float(rewards[i]), counted, info)
+        if summary is not None:
+            self._episodes.append(summary)
 
     def _on_step(self) -> bool:
         self.n_training_episodes += int(np.sum(self.locals["dones"]))
@@ -267,10 +251,19 @@ class TaskEvalCallback(EvalCallback):
         """
         if self.model.get_vec_normalize_env() is not None:
             sync_envs_normalization(self.training_env, self.eval_env)
-
-        episodes = self._evaluate()
-        episode_rewards = [e["reward"] for e in episodes]
-        episode_lengths = [e["length"] for e in episodes]
+        self._episodes = []
+        self._sums = _EpisodeTracker(self.eval_env.num_envs)
+        episode_rewards, episode_lengths = evaluate_policy(
+            self.model,
+            self.eval_env,
+            n_eval_episodes=self.n_eval_episodes,
+            render=self.render,
+            deterministic=self.deterministic,
+            return_episode_rewards=True,
+            warn=self.warn,
+            callback=self._log_success_callback,
+        )
+        episodes = self._episodes
         successes = [bool(e["is_success"]) for e in episodes]
         task_returns = [e["task_return"] for e in episodes]
         final_segments = [int(e["segment"]) for e in episodes if e["segment"] is not None]
@@ -280,25 +273,26 @@ class TaskEvalCallback(EvalCallback):
 
         self.evaluations_timesteps.append(self.num_timesteps)
         self.evaluations_episodes.append(self.n_training_episodes)
-        self.evaluations_results.append(episode_rewards)
-        self.evaluations_length.append(episode_lengths)
+        self.evaluations_results.append([float(r) for r in episode_rewards])
+        self.evaluations_length.append([int(n) for n in episode_lengths])
         self.evaluations_successes.append(successes)
         self.evaluations_task_returns.append(task_returns)
         self.evaluations_final_segments.append(final_segments)
         self.success_rates.append(success_rate)
         self.task_returns.append(task_return)
         if self.log_path is not None:
-            np.savez(
-                self.log_path,
-                timesteps=self.evaluations_timesteps,
-                episodes=self.evaluations_episodes,
-                results=self.evaluations_results,
-                ep_lengths=self.evaluations_length,
-                successes=self.evaluations_successes,
-                task_returns=self.evaluations_task_returns,
-                success_rate=self.success_rates,
-                task_return=self.task_returns,
-            )
+            with atomic_write(self.log_path + ".npz", "wb") as fh:
+                np.savez(
+                    fh,
+                    timesteps=self.evaluations_timesteps,
+                    episodes=self.evaluations_episodes,
+                    results=self.evaluations_results,
+                    ep_lengths=self.evaluations_length,
+                    successes=self.evaluations_successes,
+                    task_returns=self.evaluations_task_returns,
+                    success_rate=self.success_rates,
+                    task_return=self.task_returns,
+                )
 
         if self.verbose >= 1:
             print(

@@ -20,7 +20,8 @@ import yaml
 from rich.console import Console
 from rich.table import Table
 
-from swirl_wrappers._checks import is_integer
+from swirl_wrappers._io import atomic_write
+from swirl_wrappers._validation import check_int
 
 console = Console(stderr=True)
 
@@ -39,11 +40,9 @@ class Preset:
 
 
 PRESETS: dict[str, Preset] = {
-    # Five demos give each region about five points, nearly identical along some axes (all
-    # demos accelerate to 0.3 m/s from starts 1-5 cm apart in y); with the default 1e-3 floor
-    # the first region is so thin that half the start states never enter it and the agent
-    # stays in segment 0 (cloned success 35-70 % on tuning seeds 0-4). A floor of 0.1 of each
-    # axis's variance: 77-98 %.
+    # Five demos give each region about five points, nearly identical along some axes: a
+    # covariance floor of 0.1 of each axis's variance keeps the first region wide enough for
+    # new start states (see the README's tuning table).
     "parking": Preset(
         "sb3_swirl/ParallelParking-v0",
         5,
@@ -96,6 +95,7 @@ def _algo_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
 
 
 def _swirl_wrapper_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
+    """The ``SwirlWrapper`` arguments of an rl-zoo entry's ``env_wrapper`` (no task)."""
     wrappers = hyperparams.get("env_wrapper") or []
     for entry in wrappers if isinstance(wrappers, list) else [wrappers]:
         if isinstance(entry, dict) and "swirl_wrappers.SwirlWrapper" in entry:
@@ -109,11 +109,6 @@ def rollouts_to_success(curve: list[dict[str, float]], target: float) -> int | N
         if point["success_rate"] >= target:
             return int(point["episodes"])
     return None
-
-
-def _check_count(value: Any, name: str, minimum: int) -> None:
-    if not is_integer(value, minimum):
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
 
 
 def train_and_evaluate(
@@ -137,7 +132,7 @@ def train_and_evaluate(
     from sb3_swirl.dqn import SwirlDQN
     from swirl_wrappers import SwirlWrapper
 
-    _check_count(total_timesteps, "total_timesteps", 1)
+    check_int("total_timesteps", total_timesteps, low=1)
     hyperparams = load_hyperparams(algo, preset.env_id)
     kwargs = _algo_kwargs(hyperparams)
     policy = hyperparams.get("policy", "MlpPolicy")
@@ -256,8 +251,8 @@ def run_demo(
     preset = PRESETS[name]
     n_demos = preset.n_demos if n_demos is None else n_demos
     steps = preset.total_timesteps if total_timesteps is None else total_timesteps
-    _check_count(n_demos, "n_demos", 2)
-    _check_count(steps, "total_timesteps", 1)
+    check_int("n_demos", n_demos, low=2)
+    check_int("total_timesteps", steps, low=1)
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
 
@@ -298,7 +293,8 @@ def run_demo(
         "runs": runs,
         "rollout_ratio_swirl_over_dqn": ratio,
     }
-    (out / "results.json").write_text(json.dumps(results, indent=1))
+    with atomic_write(out / "results.json") as fh:
+        fh.write(json.dumps(results, indent=1))
     plot_learning_curves(runs, preset, out / "learning_curve.png")
 
     table = Table(title=f"{name}: SWIRL vs DQN ({steps} steps each, seed {seed})")

@@ -1,49 +1,70 @@
-"""The SWIRL proxy task as a Stable-Baselines3 ``VecEnvWrapper``."""
+"""The SWIRL proxy task on Stable-Baselines3 vector envs: ``SwirlVecEnv`` and ``make_swirl_env``."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
-from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import (
+    DummyVecEnv,
+    VecEnv,
+    VecEnvWrapper,
+    VecFrameStack,
+    VecNormalize,
+    unwrap_vec_wrapper,
+)
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
-from swirl_wrappers import SegmentTracker, TaskModel
-from swirl_wrappers.wrappers import SEGMENT_KEY
+from swirl_wrappers import Lifter, RewardConfig, SegmentTracker, SwirlWrapper, TaskModel
+from swirl_wrappers._validation import check_int
+from swirl_wrappers.wrappers import SEGMENT_KEY, SEGMENT_REWARD_KEY, TASK_REWARD_KEY
 
-__all__ = ["SwirlVecEnv"]
+__all__ = ["SwirlVecEnv", "get_swirl_attr", "make_swirl_env"]
+
+#: What every SWIRL env answers to ``VecEnv.get_attr``: sub-envs wrapped with ``SwirlWrapper``
+#: and a ``SwirlVecEnv`` alike.
+SWIRL_ATTRIBUTES = ("task", "reward_config", "terminate_on_completion")
 
 
 class SwirlVecEnv(VecEnvWrapper):
     """Track the SWIRL segment of every sub-environment and return the segment rewards.
 
-    The SB3 counterpart of :class:`swirl_wrappers.SwirlWrapper`, computed for all sub-envs at
-    once (:meth:`swirl_wrappers.SegmentTracker.step_lift_infos`: with numba, one compiled call
-    that also reads and writes the info dicts), with the same observations, rewards and
-    ``info`` keys (``"segment"``, ``"task_reward"``, ``"segment_reward"``). SB3
+    The Stable-Baselines3 counterpart of :class:`swirl_wrappers.SwirlWrapper`, computed for all
+    sub-envs at once by one :class:`swirl_wrappers.SegmentTracker`, with the same observations,
+    rewards and ``info`` keys (``"segment"``, ``"task_reward"``, ``"segment_reward"``). SB3
     vector envs reset a sub-env as soon as it is done: the transition's reward is computed on
     ``infos[i]["terminal_observation"]``, which is lifted with the index the episode ended with,
     and the returned observation starts the new episode. The env's own rewards are those the
     vector env returns: float32 in SB3's ``DummyVecEnv``, so ``info["task_reward"]`` (and a
-    ``task_reward_weight`` or ``"potential"`` reward built on it) can differ from a
-    ``SwirlWrapper``'s in the last float32 digit.
+    reward built on it) can differ from a ``SwirlWrapper``'s in the last float32 digit.
 
-    Put it directly on the environments (below ``VecNormalize`` or ``VecFrameStack``): the
-    task's regions live in the raw observation space.
+    Put it directly on the environments, below ``VecNormalize`` and ``VecFrameStack``: the
+    task's regions live in the raw observation space (an error says so otherwise). A
+    ``VecEnvWrapper`` cannot end one sub-env's episode: for ``terminate_on_completion``, wrap
+    each env with ``SwirlWrapper`` instead (:func:`make_swirl_env`).
 
-    ``terminate_on_completion`` needs the sub-environment to be reset, which a ``VecEnvWrapper``
-    cannot do cleanly; wrap each env with ``SwirlWrapper(..., terminate_on_completion=True)``
-    (``make_vec_env(..., wrapper_class=SwirlWrapper, wrapper_kwargs=...)``) instead.
+    ``get_attr("task")`` and ``get_attr("reward_config")`` answer for every sub-env, as for
+    sub-envs wrapped with ``SwirlWrapper``.
 
     Parameters
     ----------
     venv : VecEnv
         Sub-environments with a 1-D Box or a Dict observation space.
     task : TaskModel
-    reward_scale, region_bonus, state_key, reward_mode, task_reward_weight, gamma
-        As in :class:`swirl_wrappers.SwirlWrapper`.
+    reward_config : RewardConfig or dict, optional
+        Default: ``task.reward_config``.
+    state_key : str, optional
+        For Dict observations, the key of the task state (default ``"observation"``).
 
     Attributes
     ----------
     task : TaskModel
+    reward_config : RewardConfig
     tracker : SegmentTracker
         Indices (``tracker.index``) and episode steps (``tracker.t``) of the sub-envs.
 
@@ -52,7 +73,6 @@ class SwirlVecEnv(VecEnvWrapper):
     >>> import numpy as np
     >>> from stable_baselines3.common.env_util import make_vec_env
     >>> from swirl_wrappers import QuadraticReward, Region, TaskModel
-    >>> from sb3_swirl.vec_env import SwirlVecEnv
     >>> task = TaskModel(
     ...     regions=[Region(mean=[0.0], covariance=[[0.05**2]], threshold=1.0)],
     ...     rewards=[QuadraticReward(target=[0.0], weight=[[100.0]])],
@@ -63,7 +83,7 @@ class SwirlVecEnv(VecEnvWrapper):
     >>> obs.shape, venv.tracker.index.tolist()
     ((4, 6), [1, 1, 1, 1])
     >>> obs, rewards, dones, infos = venv.step(np.zeros(4, dtype=int))
-    >>> np.allclose(rewards, -100.0 * obs[:, 2] ** 2), infos[0]["segment"]
+    >>> bool(np.allclose(rewards, -100.0 * obs[:, 2] ** 2)), infos[0]["segment"]
     (True, 1)
     """
 
@@ -71,55 +91,178 @@ class SwirlVecEnv(VecEnvWrapper):
         self,
         venv: VecEnv,
         task: TaskModel,
-        reward_scale: float = 1.0,
-        region_bonus: float = 0.0,
-        terminate_on_completion: bool = False,
+        reward_config: RewardConfig | dict[str, Any] | None = None,
         state_key: str | None = None,
-        reward_mode: str = "quadratic",
-        task_reward_weight: float | None = None,
-        gamma: float = 0.99,
     ) -> None:
         if not isinstance(venv, VecEnv):
             raise ValueError(
                 f"SwirlVecEnv wraps an SB3 VecEnv, got {type(venv).__name__}: vectorise the env "
                 "first (DummyVecEnv), or wrap a gymnasium env with SwirlWrapper"
             )
-        if terminate_on_completion:
-            raise ValueError(
-                "SwirlVecEnv cannot end one sub-environment's episode on completion; wrap each "
-                "env with SwirlWrapper(..., terminate_on_completion=True) instead"
-            )
-        tracker = SegmentTracker(
-            task,
-            venv.num_envs,
-            venv.observation_space,
-            reward_scale,
-            region_bonus,
-            state_key,
-            reward_mode=reward_mode,
-            task_reward_weight=task_reward_weight,
-            gamma=gamma,
-        )
-        super().__init__(venv, observation_space=tracker.observation_space)
-        self.task = task
-        self.tracker = tracker
+        for below in (VecNormalize, VecFrameStack):
+            if unwrap_vec_wrapper(venv, below) is not None:
+                name = below.__name__
+                raise ValueError(
+                    f"SwirlVecEnv must sit below {name}: the task reads raw states. Wrap as "
+                    f"{name}(SwirlVecEnv(venv, task)), not SwirlVecEnv({name}(venv), task)"
+                )
+        self.lifter = Lifter(venv.observation_space, task, state_key)
+        self.tracker = SegmentTracker(task, reward_config, num_envs=venv.num_envs)
+        super().__init__(venv, observation_space=self.lifter.observation_space)
+
+    terminate_on_completion = False
+
+    @property
+    def task(self) -> TaskModel:
+        return self.tracker.task
+
+    @property
+    def reward_config(self) -> RewardConfig:
+        return self.tracker.config
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        if attr_name in SWIRL_ATTRIBUTES:
+            return [getattr(self, attr_name)] * len(self._get_indices(indices))
+        return self.venv.get_attr(attr_name, indices)
+
+    def has_attr(self, attr_name: str) -> bool:
+        return attr_name in SWIRL_ATTRIBUTES or self.venv.has_attr(attr_name)
 
     def reset(self) -> VecEnvObs:
         obs = self.venv.reset()
-        self.tracker.reset(self.tracker.states(obs))
+        self.tracker.reset(self.lifter.state(obs))
         self.reset_infos = [
             {**info, SEGMENT_KEY: index}
             for info, index in zip(self.venv.reset_infos, self.tracker.index.tolist(), strict=True)
         ]
-        return self.tracker.lift(obs)
+        return self.lifter.lift(obs, self.tracker.index)
 
     def step_wait(self) -> VecEnvStepReturn:
         obs, task_rewards, dones, infos = self.venv.step_wait()
-        terminated = None
-        if self.tracker.reward_mode == "potential":  # the only mode that reads terminated
-            # SB3 marks a time-limit end with TimeLimit.truncated; every other done is a
-            # termination.
-            truncated = [bool(info.get("TimeLimit.truncated")) for info in infos]
-            terminated = dones & ~np.array(truncated)
-        lifted, rewards = self.tracker.step_lift_infos(obs, dones, task_rewards, infos, terminated)
-        return lifted, rewards, dones, infos
+        done = np.flatnonzero(dones).tolist()
+        final = [infos[i]["terminal_observation"] for i in done]
+        # SB3 marks a time-limit end with TimeLimit.truncated; every other done is a termination.
+        truncated = np.array([info.get("TimeLimit.truncated", False) for info in infos])
+        rewards, _ = self.tracker.step(
+            self.lifter.state(obs),
+            task_rewards,
+            dones & ~truncated,
+            restart=dones if done else None,
+            final_states=np.array([self.lifter.state(o) for o in final]) if done else None,
+        )
+        ended = self.tracker.ended_index
+        for i, obs_i in zip(done, final, strict=True):
+            infos[i]["terminal_observation"] = self.lifter.lift(obs_i, ended[i])
+        for info, index, task_reward, reward in zip(
+            infos, ended.tolist(), task_rewards.tolist(), rewards.tolist(), strict=True
+        ):
+            info[SEGMENT_KEY] = index
+            info[TASK_REWARD_KEY] = task_reward
+            info[SEGMENT_REWARD_KEY] = reward
+        lifted = self.lifter.lift(obs, self.tracker.index)
+        return lifted, rewards.astype(np.float32), dones, infos
+
+
+def get_swirl_attr(env: VecEnv, name: str) -> Any:
+    """``env.get_attr(name)`` of a SWIRL env's first sub-env: ``"task"``, ``"reward_config"`` or
+    ``"terminate_on_completion"``.
+
+    A SWIRL env is a ``SwirlVecEnv`` (possibly under other ``VecEnvWrapper`` s) or a ``VecEnv``
+    whose sub-envs are wrapped with ``SwirlWrapper``; both answer SB3's ``get_attr``.
+
+    Raises
+    ------
+    ValueError
+        If the env carries no SWIRL task, with a hint on how to wrap it.
+    """
+    # has_attr first: a get_attr that fails inside a SubprocVecEnv worker kills the worker
+    if not (isinstance(env, VecEnv) and env.has_attr("task")):
+        raise ValueError(
+            "the environment carries no SWIRL proxy task: wrap it first, e.g. "
+            "`SwirlWrapper(env, task)` in every sub-env, `make_swirl_env(env_id, task, "
+            "n_envs=...)` or `SwirlVecEnv(venv, task)`"
+        )
+    return env.get_attr(name, indices=[0])[0]
+
+
+@dataclass
+class _SwirlEnvFactory:
+    """Makes ``Monitor(SwirlWrapper(base env, task, ...))``, picklable by reference.
+
+    SB3's ``SubprocVecEnv`` sends env factories to fresh processes (``forkserver``, ``spawn``).
+    Defined in this module, the factory is unpickled by importing sb3_swirl, which registers
+    the ``sb3_swirl/`` env ids there before ``gym.make`` runs.
+    """
+
+    env: str | gym.Env | Callable[[], gym.Env]
+    task: TaskModel
+    wrapper_kwargs: dict[str, Any] = field(default_factory=dict)
+    make_kwargs: dict[str, Any] = field(default_factory=dict)
+
+    def __call__(self) -> gym.Env:
+        if isinstance(self.env, str):
+            base = gym.make(self.env, **self.make_kwargs)
+        elif isinstance(self.env, gym.Env):
+            base = self.env
+        else:
+            base = self.env()
+        return Monitor(SwirlWrapper(base, self.task, **self.wrapper_kwargs))
+
+
+def make_swirl_env(
+    env: str | gym.Env | Callable[[], gym.Env],
+    task: TaskModel,
+    n_envs: int = 1,
+    seed: int | None = None,
+    wrapper_kwargs: dict[str, Any] | None = None,
+    vec_env_cls: type[VecEnv] | None = None,
+    vec_env_kwargs: dict[str, Any] | None = None,
+    **make_kwargs: Any,
+) -> VecEnv:
+    """A vectorised env whose sub-envs are ``Monitor(SwirlWrapper(env, task, **wrapper_kwargs))``.
+
+    The monitor sits outside the SWIRL wrapper, so it sees the episode as the agent does
+    (including an early end with ``terminate_on_completion``); the env's own reward stays in
+    ``info["task_reward"]``. The sub-envs can run in other processes (``SubprocVecEnv``, any
+    start method): they find the ``sb3_swirl/`` env ids there.
+
+    Parameters
+    ----------
+    env : str, gymnasium.Env or callable
+        A registered id (made with ``gym.make(env, **make_kwargs)``), an env instance
+        (``n_envs`` must then be 1) or a picklable factory.
+    task : TaskModel
+        The proxy task.
+    n_envs : int
+        Number of sub-environments.
+    seed : int, optional
+        Seed of the first sub-env; the others get ``seed + i``.
+    wrapper_kwargs : dict, optional
+        ``reward_config``, ``terminate_on_completion`` or ``state_key`` of ``SwirlWrapper``.
+    vec_env_cls : type, optional
+        ``DummyVecEnv`` (default) or ``SubprocVecEnv``.
+    vec_env_kwargs : dict, optional
+        Passed to ``vec_env_cls`` (e.g. ``{"start_method": "spawn"}``).
+
+    Examples
+    --------
+    >>> import sb3_swirl  # registers the sb3_swirl/ env ids  # doctest: +SKIP
+    >>> venv = make_swirl_env("sb3_swirl/ParallelParking-v0", task, n_envs=2)  # doctest: +SKIP
+    """
+    n_envs = check_int("n_envs", n_envs, low=1)
+    if isinstance(env, gym.Env) and n_envs != 1:
+        raise ValueError(
+            f"an env instance can back only one sub-env, got n_envs={n_envs}; "
+            "pass an env id or a factory instead"
+        )
+    factory = _SwirlEnvFactory(env, task, dict(wrapper_kwargs or {}), make_kwargs)
+    vec_env_cls = vec_env_cls or DummyVecEnv
+    if vec_env_cls is not DummyVecEnv and not isinstance(env, gym.Env):
+        factory().close()  # a bad id, task or setting fails here, not in a worker process
+    return make_vec_env(
+        factory,
+        n_envs=n_envs,
+        seed=seed,
+        vec_env_cls=vec_env_cls,
+        vec_env_kwargs=vec_env_kwargs,
+    )

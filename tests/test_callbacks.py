@@ -15,6 +15,7 @@ from test_dqn import PointEnv, point_demos, point_env, point_task
 
 from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
 from sb3_swirl.dqn import SwirlDQN
+from sb3_swirl.vec_env import make_swirl_env
 from swirl_wrappers import SwirlWrapper
 
 
@@ -160,19 +161,33 @@ class NoTermPoint(PointEnv):
         return obs, reward, False, truncated, info
 
 
-def test_task_eval_counts_episodes_ended_by_completion_under_an_inner_monitor():
-    """make_vec_env(..., wrapper_class=SwirlWrapper) puts the Monitor inside the SWIRL wrapper:
-    an episode ended by completion carries no ``info["episode"]``."""
-    kwargs = dict(wrapper_class=SwirlWrapper, seed=0)
-    kwargs["wrapper_kwargs"] = dict(task=point_task(), terminate_on_completion=True)
-    env = make_vec_env(lambda: gym.wrappers.TimeLimit(NoTermPoint(), 60), **kwargs)
-    eval_env = make_vec_env(lambda: gym.wrappers.TimeLimit(NoTermPoint(), 60), **kwargs)
+def test_task_eval_counts_episodes_ended_by_completion():
+    """Monitor outside the SWIRL wrapper (make_swirl_env) sees the episodes that end on
+    completion; under an inner Monitor (make_vec_env(..., wrapper_class=SwirlWrapper)) it never
+    would, and evaluate_policy would run on: a clear error says where Monitor belongs."""
+
+    def base():
+        return gym.wrappers.TimeLimit(NoTermPoint(), 60)
+
+    wrapper_kwargs = dict(terminate_on_completion=True)
+    env = make_swirl_env(base, point_task(), seed=0, wrapper_kwargs=wrapper_kwargs)
+    eval_env = make_swirl_env(base, point_task(), seed=1, wrapper_kwargs=wrapper_kwargs)
     model = scripted(DQN("MlpPolicy", env, learning_starts=1000, seed=0))
     callback = TaskEvalCallback(eval_env, n_eval_episodes=5, eval_freq=10, verbose=0)
     model.learn(10, callback=callback)
     assert callback.success_rates == [1.0]
     assert len(callback.evaluations_results[0]) == 5
     assert all(length < 60 for length in callback.evaluations_length[0])  # ended on completion
+
+    inner = make_vec_env(
+        base,
+        seed=0,
+        wrapper_class=SwirlWrapper,
+        wrapper_kwargs=dict(task=point_task(), **wrapper_kwargs),
+    )
+    callback = TaskEvalCallback(inner, n_eval_episodes=5, eval_freq=10, verbose=0)
+    with pytest.raises(ValueError, match=r"Monitor sits inside the SWIRL wrapper.*make_swirl_env"):
+        model.learn(10, callback=callback)
 
 
 class SuccessOnlyAtGoal(PointEnv):

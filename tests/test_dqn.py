@@ -11,9 +11,10 @@ from stable_baselines3 import DQN
 
 import sb3_swirl.envs  # noqa: F401  (registers the envs)
 from sb3_swirl.demos import Demonstration
-from sb3_swirl.dqn import SwirlDQN, find_task, make_swirl_env
+from sb3_swirl.dqn import SwirlDQN
 from sb3_swirl.experiments import PRESETS
 from sb3_swirl.features import RBFFeaturesExtractor
+from sb3_swirl.vec_env import get_swirl_attr, make_swirl_env
 from swirl_wrappers import QuadraticReward, Region, SwirlWrapper, TaskModel
 
 PARKING = "sb3_swirl/ParallelParking-v0"
@@ -105,7 +106,7 @@ def test_task_is_found_in_sub_envs_and_must_match():
     for n_envs in (0, "2", 1.0):
         with pytest.raises(ValueError, match=f"n_envs must be an integer >= 1, got {n_envs!r}"):
             make_swirl_env(lambda: PointEnv(), point_task(), n_envs=n_envs)
-    assert find_task(venv).to_json() == point_task().to_json()
+    assert get_swirl_attr(venv, "task").to_json() == point_task().to_json()
     other = TaskModel(
         regions=[Region(mean=[0.0, 0.0], covariance=np.eye(2), threshold=1.0)],
         rewards=[QuadraticReward(target=[0.0, 0.0], weight=np.eye(2))],
@@ -188,19 +189,32 @@ def test_bc_under_vec_normalize_updates_the_statistics_with_the_demo_states():
     assert accuracy >= 0.9
 
 
-def test_bad_demo_shape_is_named():
-    demo = Demonstration(np.zeros((5, 3)), np.zeros(4, dtype=int))
-    model = SwirlDQN("MlpPolicy", point_env(), demonstrations=[demo, demo], seed=0)
-    with pytest.raises(ValueError, match="demonstration 0"):
-        model.pretrain()
+@pytest.mark.parametrize(
+    ("demo", "match"),
+    [
+        (Demonstration(np.zeros((5, 3)), np.zeros(4, dtype=int)), r"demonstration 0: .*3 dims"),
+        (Demonstration(np.zeros((5, 2)), [0, 1, 4, 2]), r"1: .*Discrete\(4\).*0 \.\. 3"),
+        (Demonstration(np.zeros((5, 2)), np.array([0, 1, -1, 2])), r"1: .*Discrete\(4\)"),
+        (Demonstration(np.zeros((5, 2)), np.array([0, 1, 0.5, 2])), r"1: actions must be int"),
+    ],
+    ids=["state dims", "action too large", "negative action", "fractional action"],
+)
+def test_demos_that_do_not_fit_the_env_are_refused_when_the_model_is_built(demo, match):
+    """Not deep inside learn(): the message names the demo and the space."""
+    with pytest.raises(ValueError, match=match):
+        first = demo if demo.observations.shape[1] == 3 else point_demos(1)[0]
+        SwirlDQN("MlpPolicy", point_env(), demonstrations=[first, demo], seed=0)
 
 
 @pytest.mark.parametrize(
     "wrapper_kwargs",
     [
-        dict(reward_scale=0.5, region_bonus=2.0, terminate_on_completion=True),
-        dict(reward_mode="potential", reward_scale=0.5, task_reward_weight=2.0, gamma=0.9),
-        dict(reward_mode="potential", task_reward_weight=3.0, terminate_on_completion=True),
+        dict(reward_config=dict(scale=0.5, region_bonus=2.0), terminate_on_completion=True),
+        dict(reward_config=dict(mode="potential", scale=0.5, task_reward_weight=2.0, gamma=0.9)),
+        dict(
+            reward_config=dict(mode="potential", task_reward_weight=3.0),
+            terminate_on_completion=True,
+        ),
     ],
     ids=["quadratic", "potential", "potential-completion"],
 )
@@ -214,7 +228,7 @@ def test_prefill_matches_what_the_wrapper_shows(wrapper_kwargs):
         prefill_replay=True,
         bc_epochs=1,
         seed=0,
-        gamma=wrapper_kwargs.get("gamma", 0.99),
+        gamma=wrapper_kwargs["reward_config"].get("gamma", 0.99),
     )
     model.pretrain()
     buffer = model.replay_buffer
@@ -237,7 +251,7 @@ def test_prefill_matches_what_the_wrapper_shows(wrapper_kwargs):
 
 def test_potential_shaping_with_another_gamma_warns():
     with pytest.warns(UserWarning, match="policy-invariant only when they are equal"):
-        SwirlDQN("MlpPolicy", point_env(reward_mode="potential", gamma=0.9), gamma=0.99)
+        SwirlDQN("MlpPolicy", point_env(reward_config={"mode": "potential", "gamma": 0.9}))
 
 
 def test_inverse_dynamics_labels_state_only_demos():

@@ -8,7 +8,14 @@ import pickle
 import numpy as np
 import pytest
 
-from swirl_wrappers import SCHEMA_VERSION, QuadraticReward, RBFFeatures, Region, TaskModel
+from swirl_wrappers import (
+    SCHEMA_VERSION,
+    QuadraticReward,
+    RBFFeatures,
+    Region,
+    RewardConfig,
+    TaskModel,
+)
 from swirl_wrappers.task import angle_features
 
 
@@ -92,23 +99,38 @@ def test_batch_single_and_reference_agree(name):
     i = task.next_segment(x, t, index)
     np.testing.assert_allclose(r, want_r, rtol=1e-10, atol=1e-10)
     np.testing.assert_array_equal(i, want_i)
-    rb, ib = task.reward_and_next_batch(x, t, index)
+    rb, inside = task.evaluate(task.featurize(x), t, index)
     np.testing.assert_array_equal(rb, r)
-    np.testing.assert_array_equal(ib, i)
+    np.testing.assert_array_equal(index + inside, i)
     for row in range(0, len(x), 7):
-        r1, i1 = task.reward_and_next(x[row], int(t[row]), int(index[row]))
-        assert isinstance(r1, float) and isinstance(i1, int)
-        assert r1 == pytest.approx(want_r[row], rel=1e-10, abs=1e-10)
-        assert i1 == want_i[row]
-        assert float(task.reward(x[row], index[row])) == pytest.approx(r1, rel=1e-12, abs=1e-12)
-        assert int(task.next_segment(x[row], t[row], index[row])) == i1
+        # One state: Python numbers, bit for bit the batch's (the wrappers rely on it).
+        r1, in1 = task.evaluate(task.featurize(x[row]), int(t[row]), int(index[row]))
+        assert type(r1) is float and type(in1) is bool
+        assert r1 == rb[row] and in1 == inside[row]
+        assert task.reward(x[row], index[row]) == r1
+        assert int(task.next_segment(x[row], t[row], index[row])) == want_i[row]
+
+
+def test_a_state_gets_the_same_values_in_every_batch():
+    """Per row the same BLAS calls: values do not depend on the batch a state is in."""
+    task = random_task(0)
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(64, 4)) * rng.uniform(0.01, 100.0, size=(64, 1))
+    index = rng.integers(0, task.n_indices, 64)
+    reward, inside = task.evaluate(x, 3, index)
+    for size in (1, 2, 7, 33):
+        for start in range(0, 64 - size + 1, size):
+            rows = slice(start, start + size)
+            r, i = task.evaluate(x[rows].copy(), 3, index[rows].copy())
+            np.testing.assert_array_equal(r, reward[rows])
+            np.testing.assert_array_equal(i, inside[rows])
 
 
 def test_membership_is_exact_at_the_boundary():
-    # A 1-D region of radius 0.5: the wrapper's folded maths must keep the inclusive edge.
+    # A 1-D region of radius 0.5: the folded maths must keep the inclusive edge.
     task = TaskModel([Region([1.0], [[0.25]], 1.0)], [QuadraticReward([1.0], [[1.0]])])
-    assert task.reward_and_next(np.array([1.5]), 0, 0)[1] == 1
-    assert task.reward_and_next(np.array([1.5001]), 0, 0)[1] == 0
+    assert task.evaluate(np.array([1.5]), 0, 0)[1] is True
+    assert task.evaluate(np.array([1.5001]), 0, 0)[1] is False
     assert task.next_segment(np.array([[0.5], [0.4999]]), None, [0, 0]).tolist() == [1, 0]
 
 
@@ -194,7 +216,12 @@ def _corrupt(text: str) -> str:
         (_corrupt, "not valid JSON"),
         (lambda text: text[: len(text) // 2], "not valid JSON"),
         (lambda text: "[1, 2]", "must be a JSON object"),
-        (lambda text: text.replace('"schema_version": 1', '"schema_version": 99'), "version 99"),
+        (
+            lambda text: text.replace(
+                f'"schema_version": {SCHEMA_VERSION}', '"schema_version": 99'
+            ),
+            "version 99",
+        ),
         (lambda text: text.replace('"swirl_task"', '"other"'), "'other'"),
     ],
 )
@@ -227,12 +254,26 @@ def test_binary_file_is_a_value_error_naming_it(tmp_path):
 @pytest.mark.parametrize(
     ("edit", "message"),
     [
-        (lambda d: d.pop("regions"), "missing field 'regions'"),
-        (lambda d: d.pop("rewards"), "missing field 'rewards'"),
-        (lambda d: d["regions"][0].pop("covariance"), "missing field 'covariance'"),
-        (lambda d: d["rewards"][1].pop("target"), "missing field 'target'"),
-        (lambda d: d.update(regions=5), "malformed task model"),
-        (lambda d: d["regions"][0].update(threshold="big"), "threshold must be a positive"),
+        (lambda d: d.pop("regions"), "task model is missing 'regions'"),
+        (lambda d: d.pop("rewards"), "task model is missing 'rewards'"),
+        (lambda d: d["regions"][0].pop("covariance"), r"regions\[0\]: .*missing 'covariance'"),
+        (lambda d: d["rewards"][1].pop("target"), r"rewards\[1\]: .*missing 'target'"),
+        (lambda d: d.update(regions=5), "regions must be a list"),
+        (lambda d: d["regions"][0].update(threshold="big"), r"regions\[0\]: .*threshold must"),
+        # Not numbers that float() would take: a hand-edited file names the key.
+        (lambda d: d["regions"][1].update(threshold=True), r"regions\[1\]: .*threshold .*True"),
+        (lambda d: d["regions"][0].update(time_bounds=[0, False]), "time_bounds"),
+        (lambda d: d.update(dims=[True, 1, 2, 3]), "dims must be a sequence of ints"),
+        (lambda d: d.update(treshold=3), "unknown key.*'treshold'"),
+        (lambda d: d["regions"][0].update(radius=3), r"regions\[0\]: .*unknown key.*'radius'"),
+        (lambda d: d["reward_config"].update(bonus=1), "reward_config: .*unknown key.*'bonus'"),
+        (lambda d: d["reward_config"].update(scale=-1), "reward_config: .*scale"),
+        (lambda d: d["reward_config"].update(mode="linear"), "reward_config: .*mode"),
+        # Finite but absurd: the quadratic forms would overflow, so no silent segmentation.
+        (lambda d: d["regions"][0].update(threshold=1e150), "threshold"),
+        (lambda d: d["regions"][0]["mean"].__setitem__(0, 1e150), r"Region\.mean .*1e\+150"),
+        (lambda d: d["rewards"][0]["weight"][0].__setitem__(0, -1e150), r"weight .*1e\+150"),
+        (lambda d: d["regions"][0].update(covariance=(np.eye(4) * 1e-250).tolist()), "singular"),
         (lambda d: d["regions"][0].update(mean=[1.0, None, 0.0, 0.0]), "mean"),
         (lambda d: d["regions"][0].update(mean=[True] * 4), "mean must be real"),
         (lambda d: d["rewards"][0].update(target=["1.5", 0, 0, 0]), "target must be real"),
@@ -364,12 +405,12 @@ def test_angle_task_batch_single_and_reference_agree(name):
     task = ANGLE_TASKS[name]()
     x, t, index = _angle_batch(1)
     want_r, want_i = reference(task, x, t, index)
-    r, i = task.reward_and_next_batch(x, t, index)
+    r, inside = task.evaluate(task.featurize(x), t, index)
     np.testing.assert_allclose(r, want_r, rtol=1e-10, atol=1e-10)
-    np.testing.assert_array_equal(i, want_i)
+    np.testing.assert_array_equal(index + inside, want_i)
     for k in range(0, len(x), 37):
-        rk, ik = task.reward_and_next(x[k], t[k], int(index[k]))
-        assert rk == pytest.approx(want_r[k], rel=1e-10, abs=1e-10) and ik == want_i[k]
+        rk, ik = task.evaluate(task.featurize(x[k]), int(t[k]), int(index[k]))
+        assert rk == r[k] and ik == inside[k]
 
 
 def test_angle_task_is_continuous_across_the_wrap():
@@ -419,6 +460,54 @@ def test_task_json_without_angles_still_loads():
     assert data.pop("angles") is None  # files written before the field existed lack it
     loaded = TaskModel.from_json(json.dumps(data))
     assert loaded.angles is None and loaded.to_dict() == random_task(0).to_dict()
+
+
+def test_version_1_files_load_with_the_default_reward_settings():
+    data = random_task(0).to_dict()
+    del data["reward_config"]
+    data["schema_version"] = 1
+    loaded = TaskModel.from_json(json.dumps(data))
+    assert loaded.reward_config == RewardConfig()
+    assert loaded.to_dict()["schema_version"] == SCHEMA_VERSION == 2
+    data["reward_config"] = RewardConfig().to_dict()  # a key version 1 did not know
+    with pytest.raises(ValueError, match=r"unknown key.*'reward_config'"):
+        TaskModel.from_json(json.dumps(data))
+
+
+def test_reward_config_round_trips_with_the_task(tmp_path):
+    base = random_task(0)
+    config = RewardConfig(mode="potential", scale=0.5, task_reward_weight=10.0, gamma=0.9)
+    task = TaskModel(base.regions, base.rewards, reward_config=config)
+    assert TaskModel.from_json(task.to_json(tmp_path / "t.json")).reward_config == config
+    as_dict = TaskModel(base.regions, base.rewards, reward_config={"region_bonus": 2})
+    assert as_dict.reward_config == RewardConfig(region_bonus=2.0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"mode": "exp"}, "reward mode"),
+        ({"mode": "potential", "task_reward_weight": 0.0}, "task_reward_weight > 0"),
+        ({"gamma": 1.5}, r"gamma must be a finite number in \[0, 1\]"),
+        ({"scale": np.nan}, "reward scale"),
+        ({"scale": True}, "reward scale"),
+        ({"region_bonus": "1"}, "region_bonus"),
+        ({"region_bonus": -2}, r"region_bonus .*>= 0"),
+        ({"task_reward_weight": "a lot"}, "task_reward_weight"),
+    ],
+)
+def test_invalid_reward_config(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        RewardConfig(**kwargs)
+
+
+def test_reward_config_defaults_the_env_reward_weight_by_mode():
+    assert RewardConfig().task_reward_weight == 0.0
+    assert RewardConfig(mode="potential").task_reward_weight == 1.0
+    with pytest.raises(ValueError, match=r"unknown key.*'reward_scale'"):
+        RewardConfig.from_dict({"reward_scale": 2.0})
+    with pytest.raises(ValueError, match="RewardConfig or a dict"):
+        RewardConfig.coerce("potential")
 
 
 def test_invalid_angles():

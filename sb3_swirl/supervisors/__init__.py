@@ -23,7 +23,7 @@ import numpy as np
 import sb3_swirl.envs  # noqa: F401  (registers the sb3_swirl/ env ids)
 from sb3_swirl.demos import Demonstration
 from sb3_swirl.supervisors.acrobot import AcrobotSupervisor
-from swirl_wrappers._checks import is_integer
+from swirl_wrappers._validation import check_int
 
 #: env id -> ``"module:Class"`` of its supervisor, imported on first use
 SUPERVISORS: dict[str, str] = {
@@ -114,13 +114,10 @@ def collect_demos(
     (4, dtype('int64'))
     """
     supervisor_cls = supervisor_for(env_id)
-    if not is_integer(n, 1):
-        raise ValueError(f"n must be a positive integer, got {n!r}")
-    attempts = n if max_attempts is None else max_attempts
-    if not is_integer(attempts, n):
-        raise ValueError(f"max_attempts must be an integer >= n = {n}, got {max_attempts!r}")
-    if seed is not None and not is_integer(seed, 0):
-        raise ValueError(f"seed must be None or an integer >= 0, got {seed!r}")
+    n = check_int("n", n, low=1)
+    attempts = n if max_attempts is None else check_int("max_attempts", max_attempts, low=n)
+    if seed is not None:
+        seed = check_int("seed", seed, low=0)
     children = np.random.SeedSequence(seed).spawn(int(attempts))
 
     env = gym.make(env_id, **env_kwargs)

@@ -1,27 +1,29 @@
-"""Gymnasium runtime of a SWIRL proxy task (needs only gymnasium and numpy; numba optional)."""
+"""Gymnasium runtime of a SWIRL proxy task (needs only gymnasium and numpy)."""
 
-from swirl_wrappers.task import SCHEMA_VERSION, QuadraticReward, RBFFeatures, Region, TaskModel
-from swirl_wrappers.wrappers import (
+from swirl_wrappers.task import (
     REWARD_MODES,
-    SegmentTracker,
-    SwirlVectorWrapper,
-    SwirlWrapper,
-    lift_observation,
-    lift_observation_space,
-    progress_potential,
+    SCHEMA_VERSION,
+    QuadraticReward,
+    RBFFeatures,
+    Region,
+    RewardConfig,
+    TaskModel,
 )
+from swirl_wrappers.tracker import SegmentTracker, progress_potential
+from swirl_wrappers.wrappers import Lifter, SwirlVectorWrapper, SwirlWrapper, lift_observation_space
 
 __all__ = [
     "REWARD_MODES",
     "SCHEMA_VERSION",
+    "Lifter",
     "QuadraticReward",
     "RBFFeatures",
     "Region",
+    "RewardConfig",
     "SegmentTracker",
     "SwirlVectorWrapper",
     "SwirlWrapper",
     "TaskModel",
-    "lift_observation",
     "lift_observation_space",
     "progress_potential",
 ]

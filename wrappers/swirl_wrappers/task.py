@@ -1,7 +1,7 @@
 """The proxy task learned by SWIRL: ordered transition regions and one quadratic reward per segment.
 
 A :class:`TaskModel` is plain data. It holds no learning code, serialises to versioned JSON, and
-exposes two pure, vectorised functions:
+exposes pure, vectorised functions of a state:
 
 * :meth:`TaskModel.next_segment` -- the Markov segmentation function ``i_{t+1} = M(s_t, i_t)``
   of the paper (§5.2): the index advances when the state enters the *next* region in order;
@@ -15,20 +15,66 @@ States are mapped into *task space* before regions and rewards are evaluated: fi
 dimensions in ``dims`` are selected, optionally preceded by ``(cos, sin)`` of ``angles`` (sums of
 observation entries, e.g. the absolute link angles of a kinematic chain), then (optionally) an RBF
 feature map is applied.
+
+A task also carries the :class:`RewardConfig` the wrappers use by default: how a segment's reward
+becomes the agent's reward.
+
+:meth:`TaskModel.evaluate` is the one place where rewards and region membership are computed at
+run time (every wrapper, and :meth:`TaskModel.segment_indices` offline). It makes the same BLAS
+calls for one state as for each row of a batch, so a state gets bit-for-bit the same reward and
+region membership alone (``SwirlWrapper``) as in any vector of sub-environments, and a demo is
+segmented offline exactly as the wrappers segment it when it is replayed.
 """
 
 from __future__ import annotations
 
-import functools
 import json
-import operator
+import math
+import numbers
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-SCHEMA_VERSION = 1
+from swirl_wrappers._io import atomic_write
+from swirl_wrappers._validation import check_option, check_real
+
+#: Version written by :meth:`TaskModel.to_json`; version 1 files (no reward settings) still load.
+SCHEMA_VERSION = 2
+REWARD_MODES = ("quadratic", "potential")
+# Numbers in a task stay within this bound, so that the product of two of them stays finite.
+_LIMIT = 1e100
+
+
+def _quadratic(factor: np.ndarray, centre: np.ndarray, x: np.ndarray) -> Any:
+    """``||factor (x - centre)||^2`` for states ``x`` of shape (p,) or (n, p)."""
+    z = (np.asarray(x, dtype=np.float64) - centre) @ factor.T
+    return np.einsum("...i,...i->...", z, z)
+
+
+def _rowwise(matrix: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``matrix @ x`` for one vector ``x`` (p,), or for each row of ``x`` (n, p) with ``matrix``
+    of shape (m, p) or one (n, m, p) per row: per row the same BLAS matrix-vector product."""
+    if x.ndim == 1:
+        return matrix.dot(x)
+    return np.matmul(matrix, x[..., None])[..., 0]
+
+
+def _check_keys(data: Any, name: str, required: tuple[str, ...], optional: tuple[str, ...] = ()):
+    """Raise unless ``data`` is a JSON object with the required keys and no others."""
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{name} must be a JSON object, got {type(data).__name__}")
+    missing = [key for key in required if key not in data]
+    if missing:
+        raise ValueError(f"{name} is missing {', '.join(map(repr, missing))}")
+    unknown = sorted(set(data) - set(required) - set(optional))
+    if unknown:
+        raise ValueError(
+            f"{name} has unknown key(s) {', '.join(map(repr, unknown))}; expected "
+            f"{', '.join(map(repr, required + optional))}"
+        )
 
 
 def _as_float_array(value: Any, name: str, ndim: int) -> np.ndarray:
@@ -44,31 +90,57 @@ def _as_float_array(value: Any, name: str, ndim: int) -> np.ndarray:
         raise ValueError(f"{name} must have {ndim} dimension(s), got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or inf")
+    if arr.size and np.abs(arr).max() > _LIMIT:
+        raise ValueError(
+            f"{name} holds {np.abs(arr).max():.3g}, beyond ±{_LIMIT:g}: such values overflow "
+            "the quadratic forms; rescale the task"
+        )
     return arr
+
+
+def _as_float(value: Any, name: str, *, positive: bool = False) -> float:
+    return check_real(name, value, low=0.0 if positive else -_LIMIT, high=_LIMIT, low_open=positive)
+
+
+def _as_indices(value: Any, name: str) -> tuple[int, ...]:
+    """A sequence of non-negative ints (not bools, not a string)."""
+    if isinstance(value, str | bytes | Mapping) or not hasattr(value, "__iter__"):
+        raise ValueError(f"{name} must be a sequence of ints, got {value!r}")
+    out = []
+    for item in value:
+        if isinstance(item, bool | np.bool_) or not isinstance(item, numbers.Integral):
+            raise ValueError(f"{name} must be a sequence of ints, got {value!r}")
+        if item < 0:
+            raise ValueError(f"{name} must be non-negative indices, got {value!r}")
+        out.append(int(item))
+    return tuple(out)
 
 
 def check_angles(angles: Any) -> tuple[tuple[int, ...], ...] | None:
     """Validate ``TaskModel.angles``: ``None`` or non-empty sequences of non-negative ints."""
     if angles is None:
         return None
-    try:
-        if isinstance(angles, str) or any(isinstance(angle, str) for angle in angles):
-            raise TypeError("strings are not index sequences")
-        out = tuple(tuple(operator.index(i) for i in angle) for angle in angles)
-    except (TypeError, ValueError) as exc:
+    if isinstance(angles, str | bytes | Mapping) or not hasattr(angles, "__iter__"):
         raise ValueError(
             f"TaskModel.angles must be a sequence of sequences of ints, got {angles!r}"
+        )
+    try:
+        out = tuple(_as_indices(angle, "TaskModel.angles") for angle in angles)
+    except ValueError as exc:
+        raise ValueError(
+            f"TaskModel.angles must be a sequence of sequences of ints (non-negative observation "
+            f"indices), got {angles!r}"
         ) from exc
-    if not out or any(not angle or min(angle) < 0 for angle in out):
+    if not out or not all(out):
         raise ValueError(
             "TaskModel.angles must hold at least one angle, each a non-empty sequence of "
-            f"non-negative observation indices, got {angles!r}"
+            f"observation indices, got {angles!r}"
         )
     return out
 
 
-def _angle_features(phi: np.ndarray) -> np.ndarray:
-    """``(cos phi_1, sin phi_1, ..., cos phi_m, sin phi_m)`` for angles of shape (..., m)."""
+def _angle_features(obs: np.ndarray, angles: tuple[tuple[int, ...], ...]) -> np.ndarray:
+    phi = np.stack([obs[..., list(angle)].sum(axis=-1) for angle in angles], axis=-1)
     return np.stack([np.cos(phi), np.sin(phi)], axis=-1).reshape(*phi.shape[:-1], -1)
 
 
@@ -92,16 +164,110 @@ def angle_features(obs: np.ndarray, angles: Any) -> np.ndarray:
     used = max(i for angle in checked for i in angle)
     if x.shape[-1] <= used:
         raise ValueError(f"observation has {x.shape[-1]} dims but angles use index {used}")
-    phi = np.stack([x[..., list(angle)].sum(axis=-1) for angle in checked], axis=-1)
-    return _angle_features(phi)
+    return _angle_features(x, checked)
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """How the wrappers turn the segment rewards into the agent's reward.
+
+    ``R_i(s')`` is the local reward of the segment ``i`` in force *before* the step, ``r`` the
+    environment's own reward and ``entered`` 1 on the step that reaches region ``i``:
+
+    * ``mode="quadratic"`` (the paper's proxy reward):
+      ``scale * R_i(s') + region_bonus * entered + task_reward_weight * r``;
+    * ``mode="potential"`` (potential-based shaping of the environment's reward, Ng et al. 1999):
+      ``task_reward_weight * r + scale * (gamma * Phi(s', i') - Phi(s, i)) + region_bonus *
+      entered``, with the progress potential ``Phi(s, i) = i + 1 / (1 - R_i(s))`` (segments done
+      plus closeness to the next region) and ``Phi = 0`` after a termination. The shaping
+      telescopes over an episode, so with ``region_bonus = 0`` and ``gamma`` equal to the
+      agent's discount the optimal policies are the true task's.
+
+    Parameters
+    ----------
+    mode : {"quadratic", "potential"}
+    scale : float
+        Weight (>= 0) of the segment reward or of the shaping term.
+    region_bonus : float
+        Added (>= 0) on the step that reaches the next region.
+    task_reward_weight : float, optional
+        Weight (>= 0) of the environment's own reward; default 0 for ``"quadratic"`` and 1 for
+        ``"potential"`` (where it must be > 0: shaping alone leaves every policy equal).
+    gamma : float
+        Discount of the shaping term, in [0, 1]; set it to the agent's.
+
+    Examples
+    --------
+    >>> RewardConfig(mode="potential", task_reward_weight=10.0)
+    RewardConfig(mode='potential', scale=1.0, region_bonus=0.0, task_reward_weight=10.0, gamma=0.99)
+    >>> RewardConfig.from_dict({"region_bonus": 1}).region_bonus
+    1.0
+    """
+
+    mode: str = "quadratic"
+    scale: float = 1.0
+    region_bonus: float = 0.0
+    task_reward_weight: float | None = None
+    gamma: float = 0.99
+
+    def __post_init__(self) -> None:
+        check_option("reward mode", self.mode, REWARD_MODES)
+        weight = self.task_reward_weight
+        if weight is None:
+            weight = 1.0 if self.mode == "potential" else 0.0
+        settings = {
+            "scale": check_real("reward scale", self.scale, low=0.0),
+            "region_bonus": check_real("region_bonus", self.region_bonus, low=0.0),
+            "task_reward_weight": check_real("task_reward_weight", weight, low=0.0),
+            "gamma": check_real("gamma", self.gamma, low=0.0, high=1.0),
+        }
+        if self.mode == "potential" and settings["task_reward_weight"] == 0.0:
+            raise ValueError(
+                "mode='potential' shapes the environment's own reward and needs "
+                "task_reward_weight > 0 (shaping alone leaves every policy equal)"
+            )
+        for name, value in settings.items():
+            object.__setattr__(self, name, value)
+
+    @property
+    def potential(self) -> bool:
+        """Whether the reward is potential-based shaping (``mode="potential"``)."""
+        return self.mode == "potential"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "mode": self.mode,
+            "scale": self.scale,
+            "region_bonus": self.region_bonus,
+            "task_reward_weight": self.task_reward_weight,
+            "gamma": self.gamma,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> RewardConfig:
+        """Build from a mapping of its fields (a JSON object or a YAML entry); unknown keys are
+        errors that name them."""
+        _check_keys(data, "reward_config", (), tuple(cls().to_dict()))
+        return cls(**data)
+
+    @classmethod
+    def coerce(cls, value: RewardConfig | Mapping[str, Any]) -> RewardConfig:
+        """``value`` if it is a RewardConfig, else one built from a mapping of its fields."""
+        if isinstance(value, RewardConfig):
+            return value
+        if isinstance(value, Mapping):
+            return cls.from_dict(value)
+        raise ValueError(
+            f"reward_config must be a RewardConfig or a dict of its fields, got {value!r}"
+        )
 
 
 @dataclass(frozen=True, eq=False)
 class Region:
     """An ellipsoidal transition region in task space, optionally limited to a time window.
 
-    A point ``x`` at time ``t`` is inside when ``(x - mean)^T precision (x - mean) <= threshold``
-    and, if ``time_bounds`` is set, ``time_bounds[0] <= t <= time_bounds[1]``.
+    A point ``x`` at time ``t`` is inside when ``(x - mean)^T covariance^{-1} (x - mean) <=
+    threshold`` and, if ``time_bounds`` is set, ``time_bounds[0] <= t <= time_bounds[1]``.
 
     Parameters
     ----------
@@ -113,14 +279,22 @@ class Region:
         Squared Mahalanobis radius (a chi-square quantile chosen at fit time).
     time_bounds : tuple of float, optional
         Inclusive window of time steps in which the region counts as reached.
+
+    Attributes
+    ----------
+    whitening : array of shape (p, p)
+        ``L^{-1}`` for the Cholesky factor ``L`` of the covariance: the squared Mahalanobis
+        distance is ``||whitening (x - mean)||^2``.
+    precision : array of shape (p, p)
+        The inverse covariance, ``whitening^T whitening``.
     """
 
     mean: np.ndarray
     covariance: np.ndarray
     threshold: float
     time_bounds: tuple[float, float] | None = None
-    precision: np.ndarray = field(init=False, repr=False)
     whitening: np.ndarray = field(init=False, repr=False)
+    precision: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         mean = _as_float_array(self.mean, "Region.mean", 1)
@@ -135,23 +309,17 @@ class Region:
             whitening = np.linalg.inv(np.linalg.cholesky(cov))
         except np.linalg.LinAlgError as exc:
             raise ValueError("Region.covariance must be positive definite") from exc
-        try:
-            threshold = float(self.threshold)
-        except (TypeError, ValueError):
-            threshold = np.nan
-        if not (np.isfinite(threshold) and threshold > 0):
-            raise ValueError(f"Region.threshold must be a positive number, got {self.threshold!r}")
+        if not np.abs(whitening).max() <= _LIMIT:
+            raise ValueError("Region.covariance is numerically singular")
+        threshold = _as_float(self.threshold, "Region.threshold", positive=True)
         bounds = self.time_bounds
         if bounds is not None:
-            try:
-                lo, hi = (float(b) for b in bounds)
-            except (TypeError, ValueError) as exc:
-                raise ValueError(
-                    f"Region.time_bounds must be a pair of numbers, got {bounds!r}"
-                ) from exc
-            bounds = (lo, hi)
-            if np.isnan(lo) or np.isnan(hi) or not lo <= hi:
+            if isinstance(bounds, str | bytes | Mapping) or len(bounds) != 2:
+                raise ValueError(f"Region.time_bounds must be a pair of numbers, got {bounds!r}")
+            lo, hi = (check_real("Region.time_bounds", b, low=-math.inf) for b in bounds)
+            if not lo <= hi:
                 raise ValueError(f"Region.time_bounds must be (lo, hi) with lo <= hi, got {bounds}")
+            bounds = (lo, hi)
         object.__setattr__(self, "mean", mean)
         object.__setattr__(self, "covariance", cov)
         object.__setattr__(self, "threshold", threshold)
@@ -159,13 +327,13 @@ class Region:
         object.__setattr__(self, "whitening", whitening)
         object.__setattr__(self, "precision", whitening.T @ whitening)
 
-    def mahalanobis2(self, x: np.ndarray) -> np.ndarray:
+    def mahalanobis2(self, x: np.ndarray) -> Any:
         """Squared Mahalanobis distance of ``x`` (shape (p,) or (n, p)) to the centre."""
-        diff = np.asarray(x, dtype=np.float64) - self.mean
-        return np.einsum("...i,ij,...j->...", diff, self.precision, diff)
+        return _quadratic(self.whitening, self.mean, x)
 
-    def contains(self, x: np.ndarray, t: np.ndarray | float | None = None) -> np.ndarray:
-        """Whether ``x`` (shape (p,) or (n, p)) at time ``t`` lies in the region."""
+    def contains(self, x: np.ndarray, t: np.ndarray | float | None = None) -> Any:
+        """Whether ``x`` (shape (p,) or (n, p)) at time ``t`` lies in the region (``t`` None:
+        whatever the time)."""
         inside = self.mahalanobis2(x) <= self.threshold
         if self.time_bounds is not None and t is not None:
             t = np.asarray(t, dtype=np.float64)
@@ -181,14 +349,9 @@ class Region:
         }
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Region:
-        bounds = data.get("time_bounds")
-        return cls(
-            mean=data["mean"],
-            covariance=data["covariance"],
-            threshold=data["threshold"],
-            time_bounds=None if bounds is None else tuple(bounds),
-        )
+    def from_dict(cls, data: Mapping[str, Any]) -> Region:
+        _check_keys(data, "region", ("mean", "covariance", "threshold"), ("time_bounds",))
+        return cls(data["mean"], data["covariance"], data["threshold"], data.get("time_bounds"))
 
 
 @dataclass(frozen=True, eq=False)
@@ -201,10 +364,17 @@ class QuadraticReward:
         The centroid ``mu_i`` of the region this segment leads to.
     weight : array of shape (p, p)
         Symmetric positive semi-definite matrix ``Psi_i``.
+
+    Attributes
+    ----------
+    factor : array of shape (p, p)
+        A square root of ``weight`` (``factor^T factor = weight``): ``R(x) = -||factor (x -
+        target)||^2``.
     """
 
     target: np.ndarray
     weight: np.ndarray
+    factor: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         target = _as_float_array(self.target, "QuadraticReward.target", 1)
@@ -216,26 +386,28 @@ class QuadraticReward:
             )
         if not np.allclose(weight, weight.T):
             raise ValueError("QuadraticReward.weight must be symmetric")
-        if np.linalg.eigvalsh(weight).min() < -1e-9 * max(1.0, np.abs(weight).max()):
+        eigval, eigvec = np.linalg.eigh(weight)
+        if eigval.min() < -1e-9 * max(1.0, np.abs(weight).max()):
             raise ValueError("QuadraticReward.weight must be positive semi-definite")
         object.__setattr__(self, "target", target)
         object.__setattr__(self, "weight", weight)
+        object.__setattr__(self, "factor", np.sqrt(eigval.clip(0.0))[:, None] * eigvec.T)
 
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        diff = np.asarray(x, dtype=np.float64) - self.target
-        return -np.einsum("...i,ij,...j->...", diff, self.weight, diff)
+    def __call__(self, x: np.ndarray) -> Any:
+        return -_quadratic(self.factor, self.target, x)
 
     def to_dict(self) -> dict[str, Any]:
         return {"target": self.target.tolist(), "weight": self.weight.tolist()}
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> QuadraticReward:
+    def from_dict(cls, data: Mapping[str, Any]) -> QuadraticReward:
+        _check_keys(data, "reward", ("target", "weight"))
         return cls(target=data["target"], weight=data["weight"])
 
 
 @dataclass(frozen=True, eq=False)
 class RBFFeatures:
-    """An explicit RBF feature map ``phi(s) = exp(-gamma ||s - c_j||^2) @ projection``.
+    """An explicit RBF feature map ``phi(s) = exp(-gamma ||s - c_j||^2) @ projection - offset``.
 
     This is the runtime half of an approximate (Nyström) kernel PCA: the landmarks ``c_j`` and
     the projection are learned at fit time; evaluating the map needs only numpy.
@@ -270,12 +442,12 @@ class RBFFeatures:
         )
         if offset.shape != (projection.shape[1],):
             raise ValueError(f"RBFFeatures.offset must have shape ({projection.shape[1]},)")
-        if not (np.isfinite(self.gamma) and self.gamma > 0):
-            raise ValueError(f"RBFFeatures.gamma must be positive, got {self.gamma}")
+        gamma = _as_float(self.gamma, "RBFFeatures.gamma", positive=True)
         object.__setattr__(self, "landmarks", landmarks)
         object.__setattr__(self, "projection", projection)
         object.__setattr__(self, "offset", offset)
-        object.__setattr__(self, "gamma", float(self.gamma))
+        object.__setattr__(self, "gamma", gamma)
+        object.__setattr__(self, "_projection_t", np.ascontiguousarray(projection.T))
 
     @property
     def input_dim(self) -> int:
@@ -287,8 +459,8 @@ class RBFFeatures:
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
         s = np.asarray(s, dtype=np.float64)
-        sq = np.sum((s[..., None, :] - self.landmarks) ** 2, axis=-1)
-        return np.exp(-self.gamma * sq) @ self.projection - self.offset
+        phi = np.exp(-self.gamma * np.sum((s[..., None, :] - self.landmarks) ** 2, axis=-1))
+        return _rowwise(self._projection_t, phi) - self.offset
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -300,9 +472,10 @@ class RBFFeatures:
         }
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> RBFFeatures:
-        if data.get("type") != "rbf":
+    def from_dict(cls, data: Mapping[str, Any]) -> RBFFeatures:
+        if isinstance(data, Mapping) and data.get("type") != "rbf":
             raise ValueError(f"unknown feature map type {data.get('type')!r}")
+        _check_keys(data, "features", ("type", "landmarks", "gamma", "projection"), ("offset",))
         return cls(data["landmarks"], data["gamma"], data["projection"], data.get("offset"))
 
 
@@ -331,6 +504,9 @@ class TaskModel:
         joint angles of a chain into absolute link angles, in which link positions are linear
         (the acrobot's tip height is ``-cos(theta1) - cos(theta1 + theta2)``:
         ``angles=[[0], [0, 1]]``).
+    reward_config : RewardConfig or dict, optional
+        How the wrappers reward the agent with this task unless they are given other settings
+        (default ``RewardConfig()``: the paper's quadratic segment reward).
 
     Examples
     --------
@@ -354,6 +530,7 @@ class TaskModel:
     features: RBFFeatures | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
     angles: tuple[tuple[int, ...], ...] | None = None
+    reward_config: RewardConfig = field(default_factory=RewardConfig)
 
     def __post_init__(self) -> None:
         regions = tuple(self.regions)
@@ -365,14 +542,15 @@ class TaskModel:
                 f"TaskModel needs one reward per region: {len(regions)} regions, "
                 f"{len(rewards)} rewards"
             )
-        for i, item in enumerate(regions):
-            if not isinstance(item, Region):
-                raise ValueError(f"regions[{i}] is a {type(item).__name__}, expected Region")
-        for i, item in enumerate(rewards):
-            if not isinstance(item, QuadraticReward):
-                raise ValueError(
-                    f"rewards[{i}] is a {type(item).__name__}, expected QuadraticReward"
-                )
+        for name, items, cls in (
+            ("regions", regions, Region),
+            ("rewards", rewards, QuadraticReward),
+        ):
+            for i, item in enumerate(items):
+                if not isinstance(item, cls):
+                    raise ValueError(
+                        f"{name}[{i}] is a {type(item).__name__}, expected {cls.__name__}"
+                    )
         if self.features is not None and not isinstance(self.features, RBFFeatures):
             raise ValueError(
                 f"features is a {type(self.features).__name__}, expected RBFFeatures or None"
@@ -383,22 +561,15 @@ class TaskModel:
                 raise ValueError(
                     f"segment {i}: region/reward dimension differs from task-space dimension {p}"
                 )
-        try:
-            if isinstance(self.dims, str):
-                raise TypeError("a string is not a sequence of indices")
-            dims = None if self.dims is None else tuple(operator.index(d) for d in self.dims)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(
-                f"TaskModel.dims must be a sequence of ints, got {self.dims!r}"
-            ) from exc
+        dims = None if self.dims is None else _as_indices(self.dims, "TaskModel.dims")
         angles = check_angles(self.angles)
         if angles is not None and dims is None:
             raise ValueError(
                 "TaskModel.dims must be given with angles: it lists the observation entries "
                 "passed through besides the angle features (use () for none)"
             )
-        if dims is not None and ((not dims and angles is None) or min(dims, default=0) < 0):
-            raise ValueError(f"TaskModel.dims must be non-negative indices, got {dims}")
+        if dims == () and angles is None:
+            raise ValueError("TaskModel.dims must select at least one observation entry")
         state_dim = None if dims is None else len(dims) + 2 * len(angles or ())
         if self.features is not None:
             if state_dim is not None and self.features.input_dim != state_dim:
@@ -416,18 +587,68 @@ class TaskModel:
                 if angles
                 else f"dims selects {state_dim} values but regions live in {p} dims"
             )
-        object.__setattr__(self, "angles", angles)
-        object.__setattr__(self, "regions", regions)
-        object.__setattr__(self, "rewards", rewards)
-        object.__setattr__(self, "dims", dims)
         if not isinstance(self.metadata, dict):
             raise ValueError(f"metadata must be a dict, got {type(self.metadata).__name__}")
         try:  # checked now: a task that to_json cannot write would be lost
             json.dumps(self.metadata)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"metadata must be JSON-serialisable: {exc}") from exc
-        object.__setattr__(self, "metadata", dict(self.metadata))
-        object.__setattr__(self, "_tables", _Tables.build(self))
+        for name, value in (
+            ("regions", regions),
+            ("rewards", rewards),
+            ("dims", dims),
+            ("angles", angles),
+            ("metadata", dict(self.metadata)),
+            ("reward_config", RewardConfig.coerce(self.reward_config)),
+        ):
+            object.__setattr__(self, name, value)
+        self._build_tables()
+
+    def _build_tables(self) -> None:
+        """Fold every index's reward and region into one affine map, evaluated per step.
+
+        For index ``i``, ``z = factors[i] @ x - offsets[i]`` holds ``F_i (x - mu_i)`` (with
+        ``F_i^T F_i = Psi_i``) above ``L_i^{-1} (x - m_i)`` (with ``L_i L_i^T`` region ``i``'s
+        covariance), so ``halves @ z**2`` is ``(R_i(x), squared Mahalanobis distance)``. Index
+        ``k`` has segment ``k - 1``'s reward and no region: a threshold below any distance.
+        """
+        p = self.task_dim
+        blocks = []
+        for i in range(self.n_indices):
+            reward = self.rewards[min(i, self.n_segments - 1)]
+            region = self.regions[i] if i < self.n_segments else None
+            whitening = np.zeros((p, p)) if region is None else region.whitening
+            mean = np.zeros(p) if region is None else region.mean
+            factor = np.vstack([reward.factor, whitening])
+            blocks.append(
+                (factor, np.concatenate([reward.factor @ reward.target, whitening @ mean]))
+            )
+        windows = [r.time_bounds or (-math.inf, math.inf) for r in self.regions]
+        windows.append((-math.inf, math.inf))
+        thresholds = [r.threshold for r in self.regions] + [-1.0]
+        factors = np.stack([factor for factor, _ in blocks])
+        offsets = np.stack([offset for _, offset in blocks])
+        tables = {
+            "_factors": factors,
+            "_offsets": offsets,
+            "_halves": np.kron(np.diag([-1.0, 1.0]), np.ones(p)),
+            "_threshold": np.array(thresholds),
+            # The same rows per index, for one state at a time.
+            "_per_index": [
+                (factors[i], offsets[i], thresholds[i], *windows[i]) for i in range(len(blocks))
+            ],
+            "_timed": any(r.time_bounds is not None for r in self.regions),
+            "_t_lo": np.array([w[0] for w in windows]),
+            "_t_hi": np.array([w[1] for w in windows]),
+            # A view of the leading entries where dims are 0, 1, ..., p - 1; else an index array.
+            "_select": None
+            if self.dims is None
+            else slice(0, len(self.dims))
+            if self.dims == tuple(range(len(self.dims)))
+            else np.array(self.dims, dtype=np.intp),
+        }
+        for name, value in tables.items():
+            object.__setattr__(self, name, value)
 
     # ------------------------------------------------------------------ shape
     @property
@@ -443,7 +664,7 @@ class TaskModel:
     @property
     def timed(self) -> bool:
         """Whether some region has a time window (then ``next_segment`` reads ``t``)."""
-        return self._tables.timed
+        return self._timed
 
     @property
     def task_dim(self) -> int:
@@ -472,170 +693,114 @@ class TaskModel:
             )
 
     def featurize(self, obs: np.ndarray) -> np.ndarray:
-        """Map observations of shape (..., obs_dim) into task space (..., task_dim)."""
-        x = np.asarray(obs, dtype=np.float64)
-        self.check_state_dim(x.shape[-1])
-        if not self._tables.linear:
-            return self._task_input(x)
-        return x if self.dims is None else x[..., list(self.dims)]
+        """Map observations of shape (..., obs_dim) into task space (..., task_dim).
 
-    def _check_index(self, index: np.ndarray | int) -> np.ndarray:
-        index = np.asarray(index)
-        if not np.issubdtype(index.dtype, np.integer):
-            raise ValueError(f"segment index must be an integer, got dtype {index.dtype}")
-        if index.size and (index.min() < 0 or index.max() > self.n_segments):
-            raise ValueError(f"segment index must lie in [0, {self.n_segments}], got {index}")
-        return index.astype(np.int64, copy=False)
-
-    def _task_input(self, obs: np.ndarray) -> np.ndarray:
-        """What the tables' factors multiply: task space, or a leading slice when linear."""
-        tb = self._tables
-        if tb.lift is None:
-            x = obs[..., tb.select]
-        else:
-            # One product gives (phi_1, phi_1 - pi/2, ..., obs[dims]) and one cosine the angle
-            # features (sin phi = cos(phi - pi/2)): a few microseconds per step, several times
-            # less than stacking and concatenating.
-            x = obs[..., tb.select].dot(tb.lift)
-            x -= tb.lift_shift
-            np.cos(x[..., : tb.n_trig], out=x[..., : tb.n_trig])
-        return x if tb.features is None else tb.features(x)
-
-    def _region_distances(self, obs: np.ndarray) -> np.ndarray:
-        """Squared Mahalanobis distance over threshold to every index's region: (n, n_indices).
-
-        A state is inside region ``i`` when column ``i`` is at most 1; the last column (index
-        ``k``, which has no region) is always above 1.
+        The wrappers call it on every step with observations that :meth:`check_state_dim`
+        accepted; it does not check them again.
         """
-        x = self._task_input(obs)
-        inputs = self.input_buffer(len(x))
-        inputs[:, :-1] = x
-        z = inputs.dot(self._tables.weights)  # the product of reward_and_next_batch
-        z *= z
-        return z.reshape(len(x), self.n_indices, 2, -1)[:, :, 1, :].sum(axis=-1)
+        x = np.asarray(obs)
+        if self.angles is not None:
+            x = np.concatenate([_angle_features(x, self.angles), x[..., list(self.dims)]], axis=-1)
+        elif self._select is not None:
+            x = x[..., self._select]
+        return x if self.features is None else self.features(x)
 
-    def reward_and_next(self, obs: np.ndarray, t: float | None, index: int) -> tuple[float, int]:
-        """Reward and segmentation step for one state, as Python scalars (the wrappers' hot path).
-
-        Returns ``(R_index(obs), M(obs, t, index))`` computed from one small matrix product. The
-        caller guarantees ``obs`` is a 1-D array that passed :meth:`check_state_dim` and
-        ``0 <= index <= k``; use :meth:`reward` and :meth:`next_segment` for checked calls.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from swirl_wrappers import QuadraticReward, Region, TaskModel
-        >>> task = TaskModel(
-        ...     regions=[Region(mean=[1.0], covariance=[[0.01]], threshold=1.0)],
-        ...     rewards=[QuadraticReward(target=[1.0], weight=[[4.0]])],
-        ... )
-        >>> task.reward_and_next(np.array([0.0]), t=0, index=0)
-        (-4.0, 0)
-        >>> reward, index = task.reward_and_next(np.array([1.05]), t=1, index=0)
-        >>> round(reward, 6), index
-        (-0.01, 1)
-        """
-        tb = self._tables
-        x = obs[tb.select] if tb.linear else self._task_input(obs)
-        # ndarray.dot: the @ operator costs about a microsecond more on arrays this small.
-        z = tb.factor_list[index].dot(x)
-        z -= tb.offset_list[index]
-        z *= z
-        reward, dist2 = tb.halves.dot(z).tolist()
-        if dist2 <= 1.0 and (t is None or tb.t_lo[index] <= t <= tb.t_hi[index]):
-            return reward, index + 1
-        return reward, index
-
-    def reward_and_next_batch(
-        self,
-        obs: np.ndarray,
-        t: np.ndarray | float | None,
-        index: np.ndarray,
-        buffer: np.ndarray | None = None,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Vectorised :meth:`reward_and_next` for ``n`` states of shape (n, obs_dim).
-
-        ``index`` has shape (n,) and ``t`` is ``None``, a scalar or shape (n,). Returns float64
-        rewards (n,) and int64 next indices (n,). Unchecked, like :meth:`reward_and_next`.
-        ``buffer``, from :meth:`input_buffer`, is reused for the inputs of the product instead
-        of a new array (the vector wrappers call this on every step).
-        """
-        tb = self._tables
-        n, m = len(index), self.n_indices
-        # One product projects onto every index's factors, offsets included (the inputs end
-        # in a column of ones); then each row keeps its own index: row index * m + index of the
-        # (n * m, 2p) reshape. `take` costs a fraction of 2-D fancy indexing.
-        inputs = self.input_buffer(n) if buffer is None else buffer[:n]
-        inputs[:, :-1] = self._task_input(obs)
-        z = inputs.dot(tb.weights).reshape(n * m, -1)
-        z = z.take(index + _row_starts(n, m), axis=0)
-        z *= z
-        # (2, n): contiguous rows, which compare and return several times faster than columns.
-        q = tb.halves.dot(z.T)
-        inside = q[1] <= _ones(n)  # an array: a scalar operand costs a conversion per call
-        if tb.timed and t is not None:
-            inside &= (t >= tb.t_lo_array[index]) & (t <= tb.t_hi_array[index])
-        return q[0], index + inside
-
-    def input_buffer(self, n: int) -> np.ndarray:
-        """A buffer for ``n`` rows of :meth:`reward_and_next_batch`'s inputs (ones at the end)."""
-        return np.ones((n, self._tables.weights.shape[0]))
-
-    def next_segment(
-        self, obs: np.ndarray, t: np.ndarray | float | None, index: np.ndarray | int
-    ) -> np.ndarray:
-        """The Markov segmentation function ``M(s_t, i_t)``.
+    def evaluate(self, x: np.ndarray, t: Any, index: Any) -> tuple[Any, Any]:
+        """The segment reward and the region test of task-space states: the run-time maths.
 
         Parameters
         ----------
-        obs : array of shape (obs_dim,) or (n, obs_dim)
-        t : time step(s), used only by regions with ``time_bounds``
-        index : current segment index(es) in ``0 .. k``
+        x : array of shape (p,) or (n, p)
+            Task-space states (:meth:`featurize`).
+        t : int, array of shape (n,) or None
+            Step(s) of the episode, read by regions with time windows (``None``: any time).
+        index : int or int array of shape (n,)
+            Segment index of each state, in ``0 .. k``.
 
         Returns
         -------
-        ndarray of int
-            ``index + 1`` where the state lies in region ``index``; ``index`` elsewhere.
+        reward : float or array of shape (n,)
+            ``R_index(x)`` (segment ``k - 1``'s reward at index ``k``).
+        inside : bool or bool array of shape (n,)
+            Whether ``x`` at ``t`` lies in region ``index`` (never at index ``k``).
+
+        Unchecked: the wrappers call it on every step with checked inputs; see
+        :meth:`reward` and :meth:`next_segment` for checked calls on observations.
         """
-        return self._evaluate(obs, t, index)[1]
+        if x.ndim == 1:
+            # One state (a wrapper's step): the same products as each row below, answered in
+            # Python numbers, which are cheaper in the per-step arithmetic that follows.
+            factors, offsets, threshold, lo, hi = self._per_index[index]
+            z = factors.dot(x)
+            z -= offsets
+            z *= z
+            reward, distance = self._halves.dot(z).tolist()
+            return reward, distance <= threshold and (t is None or lo <= t <= hi)
+        z = _rowwise(self._factors[index], x)
+        z -= self._offsets[index]
+        z *= z
+        reward, distance = _rowwise(self._halves, z).T
+        inside = distance <= self._threshold[index]
+        if self._timed and t is not None:
+            inside = inside & (self._t_lo[index] <= t) & (t <= self._t_hi[index])
+        return reward, inside
 
-    def reward(self, obs: np.ndarray, index: np.ndarray | int) -> np.ndarray:
-        """The local reward ``R_i(s)`` of segment ``index`` (segment ``k - 1``'s at index ``k``)."""
-        return self._evaluate(obs, None, index)[0]
-
-    def _evaluate(
-        self, obs: np.ndarray, t: np.ndarray | float | None, index: np.ndarray | int
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def _checked(self, obs: Any, index: Any) -> tuple[np.ndarray, Any]:
         x = np.asarray(obs, dtype=np.float64)
         if x.ndim not in (1, 2):
             raise ValueError(f"obs must have shape (obs_dim,) or (n, obs_dim), got {x.shape}")
         self.check_state_dim(x.shape[-1])
-        index = self._check_index(index)
-        batch = x[None] if x.ndim == 1 else x
-        idx = np.broadcast_to(index, batch.shape[:1])
+        index = np.asarray(index)
+        if index.dtype.kind not in "iu":
+            raise ValueError(f"segment index must be an integer, got dtype {index.dtype}")
+        if index.size and (index.min() < 0 or index.max() > self.n_segments):
+            raise ValueError(f"segment index must lie in [0, {self.n_segments}], got {index}")
+        if x.ndim == 1 and index.ndim:
+            raise ValueError("one observation takes one segment index")
+        if x.ndim == 2:
+            index = np.broadcast_to(index, x.shape[:1])
+        return self.featurize(x), index
+
+    def next_segment(self, obs: np.ndarray, t: Any, index: Any) -> Any:
+        """The Markov segmentation function ``M(s_t, i_t)``: ``index + 1`` where the state lies
+        in region ``index``, ``index`` elsewhere.
+
+        Parameters
+        ----------
+        obs : array of shape (obs_dim,) or (n, obs_dim)
+        t : int, array of shape (n,) or None
+            Step(s) of the episode, read by regions with time windows (``None``: any time).
+        index : int or array of shape (n,)
+            Current segment index(es) in ``0 .. k``.
+        """
+        x, index = self._checked(obs, index)
         if t is not None:
-            t = np.broadcast_to(np.asarray(t, dtype=np.float64), idx.shape)
-        rewards, nxt = self.reward_and_next_batch(batch, t, idx)
-        if x.ndim == 1:
-            return rewards[0], nxt[0]
-        return rewards, nxt
+            t = np.asarray(t)
+        return index + self.evaluate(x, t, index)[1]
+
+    def reward(self, obs: np.ndarray, index: Any) -> Any:
+        """The local reward ``R_i(s)`` of segment ``index`` (segment ``k - 1``'s at index ``k``)."""
+        x, index = self._checked(obs, index)
+        return self.evaluate(x, None, index)[0]
 
     def segment_indices(self, observations: np.ndarray) -> np.ndarray:
         """Run the segmentation function along one trajectory of shape (T+1, obs_dim).
 
-        ``out[t]`` is the index after observing ``s_t``: the index advances at the first step
-        whose state lies in the next region, exactly as the wrapper advances it online.
+        ``out[t]`` is the index after observing ``s_t`` (``t = 0``: the start state): the index
+        advances at the first step whose state lies in the next region, exactly as
+        :meth:`next_segment` and the wrappers advance it online, with the same arithmetic.
         """
         x = np.asarray(observations, dtype=np.float64)
         if x.ndim != 2:
             raise ValueError(f"observations must have shape (T+1, obs_dim), got {x.shape}")
         self.check_state_dim(x.shape[-1])
-        tb = self._tables
-        dist2 = self._region_distances(x).tolist()
+        x = self.featurize(x)
+        steps = np.arange(len(x))
+        inside = [self.evaluate(x, steps, i)[1].tolist() for i in range(self.n_segments)]
         out = np.zeros(len(x), dtype=np.int64)
         i = 0
-        for t, row in enumerate(dist2):
-            if row[i] <= 1.0 and tb.t_lo[i] <= t <= tb.t_hi[i]:
+        for t in range(len(x)):
+            if i < self.n_segments and inside[i][t]:
                 i += 1
             out[t] = i
         return out
@@ -650,43 +815,65 @@ class TaskModel:
             "angles": None if self.angles is None else [list(a) for a in self.angles],
             "regions": [r.to_dict() for r in self.regions],
             "rewards": [r.to_dict() for r in self.rewards],
+            "reward_config": self.reward_config.to_dict(),
             "metadata": self.metadata,
         }
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> TaskModel:
-        if not isinstance(data, dict):
+    def from_dict(cls, data: Any) -> TaskModel:
+        """Build a task from :meth:`to_dict`'s output; every malformed field is a ``ValueError``
+        that names it."""
+        if not isinstance(data, Mapping):
             raise ValueError(f"a task model must be a JSON object, got {type(data).__name__}")
         if data.get("kind") != "swirl_task":
             raise ValueError(
                 f"not a SWIRL task model: expected 'kind': 'swirl_task', got {data.get('kind')!r}"
             )
         version = data.get("schema_version")
-        if version != SCHEMA_VERSION:
+        if type(version) is not int or version not in (1, SCHEMA_VERSION):
             raise ValueError(
                 f"unsupported task model schema version {version!r}; this swirl_wrappers "
-                f"reads version {SCHEMA_VERSION}"
+                f"reads versions 1 and {SCHEMA_VERSION}"
             )
-        try:
-            features = data.get("features")
-            return cls(
-                regions=[Region.from_dict(r) for r in data["regions"]],
-                rewards=[QuadraticReward.from_dict(r) for r in data["rewards"]],
-                dims=data.get("dims"),
-                features=None if features is None else RBFFeatures.from_dict(features),
-                metadata=data.get("metadata") or {},
-                angles=data.get("angles"),
-            )
-        except KeyError as exc:
-            raise ValueError(f"malformed task model: missing field {exc.args[0]!r}") from exc
-        except (TypeError, IndexError, AttributeError) as exc:
-            raise ValueError(f"malformed task model: {exc}") from exc
+        optional = ("dims", "features", "angles", "metadata")
+        if version >= 2:
+            optional += ("reward_config",)
+        _check_keys(data, "task model", ("schema_version", "kind", "regions", "rewards"), optional)
+
+        def each(key: str, build: Any) -> list[Any]:
+            items = data[key]
+            if not isinstance(items, list):
+                raise ValueError(f"{key} must be a list, got {type(items).__name__}")
+            out = []
+            for i, item in enumerate(items):
+                try:
+                    out.append(build(item))
+                except ValueError as exc:
+                    raise ValueError(f"{key}[{i}]: {exc}") from exc
+            return out
+
+        def one(key: str, build: Any) -> Any:
+            value = data.get(key)
+            try:
+                return None if value is None else build(value)
+            except ValueError as exc:
+                raise ValueError(f"{key}: {exc}") from exc
+
+        return cls(
+            regions=each("regions", Region.from_dict),
+            rewards=each("rewards", QuadraticReward.from_dict),
+            dims=data.get("dims"),
+            features=one("features", RBFFeatures.from_dict),
+            metadata=data.get("metadata") or {},
+            angles=data.get("angles"),
+            reward_config=one("reward_config", RewardConfig.from_dict) or RewardConfig(),
+        )
 
     def to_json(self, path: str | os.PathLike | None = None) -> str:
-        """Serialise to a JSON string; also write it to ``path`` if given."""
+        """Serialise to a JSON string; also write it to ``path`` (atomically) if given."""
         text = json.dumps(self.to_dict(), indent=1)
         if path is not None:
-            with open(path, "w", encoding="utf-8") as fh:
+            with atomic_write(path) as fh:
                 fh.write(text)
         return text
 
@@ -721,117 +908,3 @@ class TaskModel:
             if file is None:
                 raise
             raise ValueError(f"{file}: {exc}") from exc
-
-
-@functools.lru_cache(maxsize=16)
-def _row_starts(n: int, m: int) -> np.ndarray:
-    """``0, m, 2m, ...`` (n values), read-only: cached, as a vector env asks for one n."""
-    starts = np.arange(0, n * m, m)
-    starts.flags.writeable = False
-    return starts
-
-
-@functools.lru_cache(maxsize=16)
-def _ones(n: int) -> np.ndarray:
-    """``n`` ones, read-only: cached like :func:`_row_starts`."""
-    ones = np.ones(n)
-    ones.flags.writeable = False
-    return ones
-
-
-@dataclass(frozen=True)
-class _Tables:
-    """Every segment's reward and region folded into one affine map, evaluated per step.
-
-    For index ``i``, the first ``p`` entries of ``factors[i] @ x - offsets[i]`` are
-    ``F_i (x - mu_i)`` with ``F_i^T F_i = Psi_i`` and the last ``p`` are
-    ``L_i^{-1} (x - m_i) / sqrt(threshold_i)`` with ``L_i L_i^T`` region ``i``'s covariance: one
-    small product, a square and two signed block sums (``halves``) give the reward ``R_i(x)``
-    and a distance that is at most 1 exactly inside region ``i``. The final index has no
-    region; a constant offset keeps its distance at 4. ``weights`` stacks every index's
-    ``factors[i].T`` over the row ``-offsets``, so ``[x, 1] @ weights`` evaluates all indices in
-    one product (batches); ``factor_list`` / ``offset_list`` serve one state at one index.
-    Wrappers call this every step, so it is built once.
-    """
-
-    select: np.ndarray | slice
-    features: RBFFeatures | None
-    linear: bool
-    lift: np.ndarray | None
-    lift_shift: np.ndarray | None
-    n_trig: int
-    weights: np.ndarray
-    halves: np.ndarray
-    factor_list: list[np.ndarray]
-    offset_list: list[np.ndarray]
-    t_lo: list[float]
-    t_hi: list[float]
-    t_lo_array: np.ndarray
-    t_hi_array: np.ndarray
-    timed: bool
-
-    @classmethod
-    def build(cls, task: TaskModel) -> _Tables:
-        k, p = task.n_segments, task.task_dim
-        linear = task.features is None and task.angles is None
-        lift = lift_shift = None
-        n_trig = 0
-        if linear:
-            # Without a feature map the dims selection is linear: fold it into the factors
-            # and read only a leading slice of the observation (a view, no copy).
-            n_in = p if task.dims is None else max(task.dims) + 1
-            embed = np.zeros((p, n_in))
-            embed[np.arange(p), np.arange(p) if task.dims is None else list(task.dims)] = 1.0
-            select: np.ndarray | slice = slice(0, n_in)
-        elif task.angles is not None:
-            dims = list(task.dims or ())
-            n_trig = 2 * len(task.angles)
-            # obs[:n_in] @ lift = (phi_1, phi_1, ..., phi_m, phi_m, obs[dims]).
-            lift = np.zeros((max([*dims, *np.concatenate(task.angles)]) + 1, n_trig + len(dims)))
-            for j, angle in enumerate(task.angles):
-                for i in angle:
-                    lift[i, 2 * j : 2 * j + 2] += 1.0
-            lift[dims, n_trig + np.arange(len(dims))] = 1.0
-            lift_shift = np.zeros(lift.shape[1])
-            lift_shift[1:n_trig:2] = np.pi / 2
-            embed = np.eye(p)
-            select = slice(0, len(lift))
-        else:
-            embed = np.eye(p)
-            select = slice(None) if task.dims is None else np.array(task.dims, dtype=np.intp)
-        factors = np.zeros((k + 1, 2 * p, embed.shape[1]))
-        offsets = np.zeros((k + 1, 2 * p))
-        for i in range(k + 1):
-            reward = task.rewards[min(i, k - 1)]
-            eigval, eigvec = np.linalg.eigh(reward.weight)
-            blocks = [(np.sqrt(np.clip(eigval, 0.0, None))[:, None] * eigvec.T, reward.target)]
-            if i < k:
-                region = task.regions[i]
-                blocks.append((region.whitening / np.sqrt(region.threshold), region.mean))
-            for b, (factor, centre) in enumerate(blocks):
-                factors[i, b * p : (b + 1) * p] = factor @ embed
-                offsets[i, b * p : (b + 1) * p] = factor @ centre
-        offsets[k, p] = -2.0
-        halves = np.kron(np.diag([-1.0, 1.0]), np.ones(p))  # R_i(x), distance
-        factors_t = np.ascontiguousarray(factors.reshape(-1, factors.shape[-1]).T)
-        bounds = [r.time_bounds or (-np.inf, np.inf) for r in task.regions]
-        t_lo = [b[0] for b in bounds] + [-np.inf]
-        t_hi = [b[1] for b in bounds] + [np.inf]
-        return cls(
-            select=select,
-            features=task.features,
-            linear=linear,
-            lift=lift,
-            lift_shift=lift_shift,
-            n_trig=n_trig,
-            # [x, 1] @ weights = factors @ x - offsets, for every index at once
-            weights=np.vstack([factors_t, -offsets.reshape(1, -1)]),
-            halves=halves,
-            factor_list=[np.ascontiguousarray(f) for f in factors],
-            offset_list=list(offsets),
-            t_lo=t_lo,
-            t_hi=t_hi,
-            t_lo_array=np.array(t_lo),
-            t_hi_array=np.array(t_hi),
-            timed=any(r.time_bounds is not None for r in task.regions),
-        )
