@@ -189,6 +189,12 @@ def train_and_evaluate(
     }
 
 
+def write_results(results: dict[str, Any], path: str | Path) -> None:
+    """Write ``results`` as indented JSON, atomically: a failure leaves the old file."""
+    with atomic_write(path) as fh:
+        fh.write(json.dumps(results, indent=1))
+
+
 def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path) -> None:
     """Success rate against training episodes, one line per method (the paper's Fig. 2)."""
     import matplotlib
@@ -293,8 +299,7 @@ def run_demo(
         "runs": runs,
         "rollout_ratio_swirl_over_dqn": ratio,
     }
-    with atomic_write(out / "results.json") as fh:
-        fh.write(json.dumps(results, indent=1))
+    write_results(results, out / "results.json")
     plot_learning_curves(runs, preset, out / "learning_curve.png")
 
     table = Table(title=f"{name}: SWIRL vs DQN ({steps} steps each, seed {seed})")

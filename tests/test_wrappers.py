@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pickle
+import subprocess
+import sys
 import warnings
 from typing import ClassVar
 
@@ -715,3 +717,49 @@ def test_one_episode_returns_python_numbers():
     assert type(reward) is float and type(terminated) is bool
     assert type(info["segment"]) is int and type(info["segment_reward"]) is float
     assert type(env.segment) is int and type(env.potential) is float
+
+
+# ----------------------------------------------------------------------- subprocess workers
+@pytest.mark.parametrize("start_method", ["spawn", "forkserver"])
+def test_make_swirl_env_runs_in_fresh_worker_processes(start_method):
+    """Workers started fresh know nothing of sb3_swirl: the factory imports it there, so the
+    sb3_swirl/ ids resolve (gymnasium no longer loads plugin entry points)."""
+    from sb3_swirl import make_swirl_env
+
+    task = TaskModel(
+        [Region([0.0, 0.0], np.eye(2), 4.0)], [QuadraticReward([0.0, 0.0], np.eye(2))], dims=(0, 1)
+    )
+    venv = make_swirl_env(
+        "sb3_swirl/ParallelParking-v0",
+        task,
+        n_envs=2,
+        seed=0,
+        vec_env_cls=SubprocVecEnv,
+        vec_env_kwargs={"start_method": start_method},
+    )
+    try:
+        assert venv.reset().shape == (2, 4 + task.n_indices)
+        _, _, _, infos = venv.step(np.zeros(2, dtype=int))
+        assert all("segment" in info and "task_reward" in info for info in infos)
+        assert venv.get_attr("task")[0].to_json() == task.to_json()
+    finally:
+        venv.close()
+
+
+def test_make_swirl_env_with_subprocesses_from_python_c(tmp_path):
+    """The user's case: a script run with ``python -c`` (no importable __main__)."""
+    TaskModel([Region([0.0], [[1.0]], 4.0)], [QuadraticReward([0.0], [[1.0]])], dims=(0,)).to_json(
+        tmp_path / "task.json"
+    )
+    code = (
+        "import numpy as np\n"
+        "from stable_baselines3.common.vec_env import SubprocVecEnv\n"
+        "from sb3_swirl import TaskModel, make_swirl_env\n"
+        f"task = TaskModel.from_json({str(tmp_path / 'task.json')!r})\n"
+        "venv = make_swirl_env('sb3_swirl/NoisyAcrobot-v0', task, n_envs=2, "
+        "vec_env_cls=SubprocVecEnv)\n"
+        "venv.reset(); venv.step(np.zeros(2, dtype=int)); venv.close(); print('ok')\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "ok"

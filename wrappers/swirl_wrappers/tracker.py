@@ -31,15 +31,16 @@ from swirl_wrappers.task import RewardConfig, TaskModel
 def progress_potential(index: Any, segment_reward: Any) -> Any:
     """The progress potential ``Phi(s, i) = i + 1 / (1 - R_i(s))`` of ``"potential"`` mode.
 
-    ``segment_reward`` is ``R_i(s)`` (at most 0) of the segment ``index`` the state is in; the
-    result lies in ``(i, i + 1]`` and grows as the state nears region ``i``.
+    ``segment_reward`` is ``R_i(s)`` of the segment ``index`` the state is in (at most 0, as
+    every segment reward is); the result lies in ``(i, i + 1]`` and grows as the state nears
+    region ``i``.
 
     Examples
     --------
     >>> progress_potential(2, 0.0), progress_potential(0, -3.0)
     (3.0, 0.25)
     """
-    return index + 1.0 / (1.0 - np.minimum(segment_reward, 0.0))
+    return index + 1.0 / (1.0 - segment_reward)
 
 
 class SegmentTracker:
@@ -210,7 +211,7 @@ class SegmentTracker:
         if self.terminate_on_completion:
             terminated = terminated | (index == task.n_segments)
         if config.potential:
-            potential = self._potential(x, index, terminated)
+            potential = self._potential(x, index, terminated, segment_reward, entered)
             reward = config.scale * (config.gamma * potential - self.potential)
             self.potential = potential
         else:
@@ -220,9 +221,19 @@ class SegmentTracker:
         self.t = t
         return reward, terminated
 
-    def _potential(self, x: np.ndarray, index: Any, terminated: Any) -> Any:
-        """``Phi(s, index)``, 0 where the episode terminated (and when not in potential mode)."""
+    def _potential(
+        self, x: np.ndarray, index: Any, terminated: Any, reward: Any = None, moved: Any = True
+    ) -> Any:
+        """``Phi(s, index)``, 0 where the episode terminated (and when not in potential mode).
+
+        ``reward`` is ``R`` of ``s`` at the index before the step: the same number as at
+        ``index`` for one episode whose index did not move (``moved`` False), so it is reused.
+        """
         if not self.config.potential:
             return 0.0 if self.num_envs is None else np.zeros(self.num_envs)
-        phi = progress_potential(index, self.task.evaluate(x, None, index)[0])
+        if self.num_envs is not None or moved:
+            reward = self.task.evaluate(x, None, index)[0]
+        phi = progress_potential(index, reward)
+        if self.num_envs is None:
+            return 0.0 if terminated else phi
         return np.where(terminated, 0.0, phi)
