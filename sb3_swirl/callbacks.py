@@ -27,6 +27,7 @@ from stable_baselines3.common.vec_env import (
 
 from sb3_swirl.vec_env import get_swirl_attr
 from swirl_wrappers._io import atomic_write
+from swirl_wrappers._validation import check_int
 
 
 def _original_rewards(env: VecNormalize | None, rewards: np.ndarray) -> np.ndarray:
@@ -93,9 +94,7 @@ class SegmentProgressCallback(BaseCallback):
 
     def __init__(self, window_size: int = 100, n_segments: int | None = None, verbose: int = 0):
         super().__init__(verbose=verbose)
-        if window_size < 1:
-            raise ValueError(f"window_size must be >= 1, got {window_size}")
-        self.window_size = window_size
+        self.window_size = check_int("window_size", window_size, low=1)
         self.n_segments = n_segments
         self.n_episodes = 0
         self._episodes: deque[dict] = deque(maxlen=window_size)

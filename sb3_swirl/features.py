@@ -9,6 +9,8 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
+from swirl_wrappers._validation import check_real
+
 
 class RBFFeaturesExtractor(BaseFeaturesExtractor):
     """Gaussian RBF features on a grid of centres, one copy per segment index.
@@ -93,8 +95,7 @@ class RBFFeaturesExtractor(BaseFeaturesExtractor):
         counts = np.broadcast_to(np.asarray(n_centers_per_dim, dtype=np.int64), (state_dim,))
         if np.any(counts < 1):
             raise ValueError(f"n_centers_per_dim must be >= 1, got {n_centers_per_dim}")
-        if not (np.isfinite(sigma) and sigma > 0):
-            raise ValueError(f"sigma must be positive, got {sigma}")
+        sigma = check_real("sigma", sigma, low=0.0, low_open=True)
         # One centre in a dimension sits mid-box; k >= 2 centres span it edge to edge.
         axes = [np.linspace(0.0, 1.0, int(k)) if k > 1 else np.array([0.5]) for k in counts]
         centers = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, state_dim)

@@ -12,6 +12,8 @@ from gymnasium import spaces
 from gymnasium.envs.classic_control import utils
 from gymnasium.envs.classic_control.acrobot import AcrobotEnv
 
+from swirl_wrappers._validation import check_real
+
 #: gravitational acceleration [m/s^2], the value gymnasium's ``AcrobotEnv._dsdt`` uses
 GRAVITY = 9.8
 
@@ -92,10 +94,9 @@ class NoisyAcrobotEnv(AcrobotEnv):
     False
     """
 
-    #: default torque magnitude [N·m]; a quarter of gymnasium's, so that the energy-pumping
-    #: :class:`~sb3_swirl.supervisors.acrobot.AcrobotSupervisor` needs 288 steps on average
-    #: (231 to 420 over 100 seeds) and uniformly random actions succeeded in none of 100
-    #: episodes of 1000 steps
+    #: default torque magnitude [N·m]; a quarter of gymnasium's, so that swinging up takes
+    #: hundreds of steps of energy pumping and random actions do not reach the line
+    #: (the README has the measured numbers)
     TORQUE = 0.25
     #: default standard deviation of the Gaussian torque noise [N·m] (20% of :attr:`TORQUE`)
     TORQUE_NOISE_STD = 0.05
@@ -111,14 +112,9 @@ class NoisyAcrobotEnv(AcrobotEnv):
         torque: float = TORQUE,
         torque_noise_std: float = TORQUE_NOISE_STD,
     ) -> None:
-        if not (math.isfinite(link_length_2) and link_length_2 > 0):
-            raise ValueError(f"link_length_2 must be a positive number, got {link_length_2!r}")
-        if not (math.isfinite(torque) and torque >= 0):
-            raise ValueError(f"torque must be a non-negative number, got {torque!r}")
-        if not (math.isfinite(torque_noise_std) and torque_noise_std >= 0):
-            raise ValueError(
-                f"torque_noise_std must be a non-negative number, got {torque_noise_std!r}"
-            )
+        link_length_2 = check_real("link_length_2", link_length_2, low=0.0, low_open=True)
+        torque = check_real("torque", torque, low=0.0)
+        torque_noise_std = check_real("torque_noise_std", torque_noise_std, low=0.0)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"

@@ -23,6 +23,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from swirl_wrappers._validation import check_real
+
 #: Action indices of :class:`ParallelParkingEnv` (see its docstring for the table).
 NOOP, ACCELERATE, DECELERATE, STEER_LEFT, STEER_RIGHT = range(5)
 
@@ -156,19 +158,13 @@ class ParallelParkingEnv(gym.Env):
                 f"render_mode must be one of {self.metadata['render_modes']} or None, "
                 f"got {render_mode!r}"
             )
-        if not dt > 0:
-            raise ValueError(f"dt must be positive, got {dt}")
-        if not 0.0 <= noise_probability <= 1.0:
-            raise ValueError(f"noise_probability must be in [0, 1], got {noise_probability}")
-        if not 0.0 < max_steering_deg < 90.0:
-            raise ValueError(f"max_steering_deg must be in (0, 90), got {max_steering_deg}")
-        for name, value in (
-            ("dt", dt),
-            ("steering_noise_deg", steering_noise_deg),
-            ("max_speed", max_speed),
-        ):
-            if not math.isfinite(value):
-                raise ValueError(f"{name} must be finite, got {value}")
+        dt = check_real("dt", dt, low=0.0, low_open=True)
+        noise_probability = check_real("noise_probability", noise_probability, low=0.0, high=1.0)
+        max_steering_deg = check_real(
+            "max_steering_deg", max_steering_deg, low=0.0, high=90.0, low_open=True, high_open=True
+        )
+        steering_noise_deg = check_real("steering_noise_deg", steering_noise_deg)
+        max_speed = check_real("max_speed", max_speed)
         if not max_speed >= 0.05 * dt:
             raise ValueError(
                 f"max_speed must be at least one speed unit (0.05 * dt = {0.05 * dt} m/s), "

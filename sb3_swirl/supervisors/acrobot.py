@@ -6,6 +6,7 @@ import gymnasium as gym
 import numpy as np
 
 from sb3_swirl.envs.acrobot import NoisyAcrobotEnv
+from swirl_wrappers._validation import check_int
 
 
 def _max_power_action(w1: float, w2: float) -> int:
@@ -25,9 +26,6 @@ class AcrobotSupervisor:
     energy pumping à la Spong with discrete torques). It takes the action whose rollout
     raises the tip above the line soonest or, when none does within the horizon, the one
     that ends with the most mechanical energy. Re-planning absorbs the torque noise.
-
-    With the default env (torque 0.25 N·m, noise 0.05 N·m) it succeeded from every one of
-    100 seeded starts, in 288 steps on average (231 to 420) of the 1000 allowed.
 
     Parameters
     ----------
@@ -61,11 +59,9 @@ class AcrobotSupervisor:
             raise ValueError(
                 f"AcrobotSupervisor controls a NoisyAcrobotEnv, got {type(unwrapped).__name__}"
             )
-        if int(horizon) < 1:
-            raise ValueError(f"horizon must be a positive integer, got {horizon!r}")
         self.env = unwrapped
         self.seed = seed
-        self.horizon = int(horizon)
+        self.horizon = check_int("horizon", horizon, low=1)
 
     def reset(self, obs: np.ndarray) -> None:
         """Start a new episode from ``obs`` (the controller keeps no state between steps)."""

@@ -40,6 +40,7 @@ from sb3_swirl.envs.parking import (
     ParallelParkingEnv,
     State,
 )
+from swirl_wrappers._validation import check_real
 
 _FORWARD, _REVERSE_IN, _REVERSE_OUT, _FINAL = range(4)
 # Heading errors a driver leaves alone: the car parks within 15 degrees anyway, and small
@@ -119,15 +120,11 @@ class ParkingSupervisor:
             raise ValueError(
                 f"ParkingSupervisor needs a ParallelParkingEnv, got {type(env).__name__}"
             )
-        if clearance < 0:
-            raise ValueError(f"clearance must be >= 0, got {clearance}")
-        if not 0.5 <= deadband < 1.0:
-            raise ValueError(f"deadband must be in [0.5, 1), got {deadband}")
         self.env = env
         self.seed = seed
-        self.clearance = float(clearance)
-        self.centre_weight = float(centre_weight)
-        self.deadband = float(deadband)
+        self.clearance = check_real("clearance", clearance, low=0.0)
+        self.centre_weight = check_real("centre_weight", centre_weight)
+        self.deadband = check_real("deadband", deadband, low=0.5, high=1.0, high_open=True)
         self._cruise = self._units(cruise_speed, "cruise_speed")
         self._reverse = self._units(reverse_speed, "reverse_speed")
         x_stops = np.arange(2.5, 6.01, 0.25) if x_stops is None else x_stops
