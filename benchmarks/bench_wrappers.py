@@ -222,7 +222,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         f"{first / later:.1f}x (no compilation: target a few x at most, the cold caches)"
     )
 
-    dqn_steps, dqn_repeats = (1_000, 2) if args.quick else (5_000, 4)
+    dqn_steps, dqn_repeats = (1_000, 2) if args.quick else (5_000, 8)
     raw_rate, swirl_rate = dqn_throughput(dqn_steps, dqn_repeats)
     ratio = swirl_rate / raw_rate
     results["dqn_throughput_ratio"] = ratio
