@@ -30,7 +30,7 @@ from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
 from sb3_swirl.demos import as_demonstrations, check_window
-from swirl_wrappers import RBFFeatures, Region
+from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
 from swirl_wrappers._checks import is_bool, is_finite_real, is_integer
 
 Indicator = Callable[[list[np.ndarray], Any], list[np.ndarray]]
@@ -307,35 +307,39 @@ _INDICATORS = {"gmm", "velocity", "linear"}
 
 
 # ---------------------------------------------------------------------------- regions
-def segment_boundaries(
-    states: np.ndarray, regions: Sequence[Region], times: np.ndarray | None = None
-) -> np.ndarray:
+def segment_boundaries(states: np.ndarray, regions: Sequence[Region]) -> np.ndarray:
     """Run the Markov segmentation function along one trajectory in task space.
+
+    The trajectory is segmented by :meth:`swirl_wrappers.TaskModel.segment_indices`, with the
+    wrappers' own arithmetic, so the fit sees the segments an agent will be given.
 
     Parameters
     ----------
     states : array of shape (T + 1, p)
-        Task-space states (after ``dims`` selection and the feature map).
+        Task-space states (after ``dims`` selection and the feature map), at steps ``0 .. T``
+        (read by regions with time bounds).
     regions : sequence of Region
-    times : array of shape (T + 1,), optional
-        Time of every state (default ``0 .. T``), used by regions with time bounds.
 
     Returns
     -------
     int array of shape (k,)
         ``out[i]`` is the step at which region ``i`` is reached, checking region ``i`` only
-        after region ``i - 1`` was reached at an earlier step (exactly as
-        :meth:`swirl_wrappers.TaskModel.segment_indices` advances); ``-1`` if never reached.
+        after region ``i - 1`` was reached at an earlier step; ``-1`` if never reached.
     """
-    times = np.arange(len(states), dtype=np.float64) if times is None else times
-    out = np.full(len(regions), -1, dtype=np.int64)
-    start = 0
-    for i, region in enumerate(regions):
-        hit = np.flatnonzero(region.contains(states[start:], times[start:]))
-        if hit.size == 0:
-            break
-        out[i] = start + hit[0]
-        start = out[i] + 1
+    return _reach_steps(_regions_task(regions), states)
+
+
+def _regions_task(regions: Sequence[Region]) -> TaskModel:
+    """A task of the regions alone (its rewards are never read), to segment with."""
+    p = regions[0].mean.size
+    return TaskModel(regions, [QuadraticReward(r.mean, np.zeros((p, p))) for r in regions])
+
+
+def _reach_steps(task: TaskModel, states: np.ndarray) -> np.ndarray:
+    """:func:`segment_boundaries` with a task built once for many trajectories."""
+    index = task.segment_indices(states)  # non-decreasing
+    out = np.searchsorted(index, np.arange(1, task.n_indices))
+    out[out == len(index)] = -1
     return out
 
 
@@ -683,7 +687,8 @@ class TransitionStateClustering(BaseEstimator):
             )
         self.regions_ = _make_disjoint([regions[i] for i in kept])
         self.region_transitions_ = [members[i] for i in kept]
-        self.segments_ = [segment_boundaries(s, self.regions_) for s in x]
+        task = _regions_task(self.regions_)
+        self.segments_ = [_reach_steps(task, s) for s in x]
         self._check_complete(self.segments_)
         return self
 
@@ -728,8 +733,8 @@ class TransitionStateClustering(BaseEstimator):
         def n_complete(subset: list[int]) -> int:
             if not subset:
                 return 0
-            shrunk = _make_disjoint([regions[j] for j in subset])
-            bounds = [segment_boundaries(s, shrunk) for s in x]
+            task = _regions_task(_make_disjoint([regions[j] for j in subset]))
+            bounds = [_reach_steps(task, s) for s in x]
             return sum(int(b[0] > 0 and b[-1] >= 0) for b in bounds)
 
         alive = list(range(len(regions)))
