@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -42,10 +43,43 @@ def _seed(text: str) -> int:
     return seed
 
 
+def _writable_folder(path: Path) -> None:
+    """Raise unless files can be made in folder ``path`` (created if missing, as by mkdir -p)."""
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"cannot write into {path}: {existing} is not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"cannot write into {path}: {existing} is not writable")
+
+
+def _check_output(output: str, *inputs: str | None) -> None:
+    """Raise before any long work unless the file ``output`` can be written and is none of
+    ``inputs``."""
+    path = Path(output)
+    for source in inputs:
+        if source is not None and (
+            path.resolve() == Path(source).resolve()
+            or (path.exists() and Path(source).exists() and path.samefile(source))
+        ):
+            raise ValueError(
+                f"the output {output} is the input {source}: writing it would replace what is "
+                "being read; choose another -o"
+            )
+    if path.is_dir():
+        raise ValueError(f"the output {output} is a directory; give a file name")
+    _writable_folder(path.resolve().parent)
+    if path.exists() and not os.access(path, os.W_OK):
+        raise ValueError(f"the output {output} is not writable")
+
+
 def _cmd_demos(args: argparse.Namespace) -> int:
     from sb3_swirl.demos import save_demos
     from sb3_swirl.supervisors import collect_demos
 
+    _check_output(args.output)
+    console.print(f"collecting {args.n} demos of {args.env_id}")
     demos = collect_demos(args.env_id, args.n, seed=args.seed, progress=not args.quiet)
     save_demos(demos, args.output)
     lengths = [len(d) for d in demos]
@@ -60,6 +94,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     from sb3_swirl.demos import load_demos
     from sb3_swirl.fitting import fit_task
 
+    _check_output(args.output, args.demos)
     demos = load_demos(args.demos)
     segmentation = {"indicator": args.indicator}
     if args.window is not None:
@@ -109,6 +144,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
     if args.demos is not None and args.plot is None:
         raise ValueError("--demos are drawn in DIR/segments.png: give --plot DIR too")
+    if args.plot is not None:
+        _writable_folder(Path(args.plot))
     task = TaskModel.from_json(args.task)
     demos = None
     if args.demos is not None:  # read before anything is printed or written
@@ -133,6 +170,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from sb3_swirl.experiments import run_demo
 
+    _writable_folder(Path(args.out))
     run_demo(
         args.task,
         seed=args.seed,
@@ -213,6 +251,9 @@ def main(argv: list[str] | None = None) -> int:
         # soft_wrap: never break a path a user may copy; escape: paths may contain [brackets]
         console.print(f"[bold red]error:[/] {escape(str(exc))}", soft_wrap=True)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C: files are written atomically, none is left half-done
+        console.print("interrupted", soft_wrap=True)
+        return 130
 
 
 if __name__ == "__main__":

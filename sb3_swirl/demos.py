@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from swirl_wrappers._io import atomic_write
+
 _NPZ_FORMAT = "sb3_swirl.demos/1"
 # Larger observations overflow float64 when squared (covariances, quadratic rewards).
 _MAX_MAGNITUDE = 1e150
@@ -231,7 +233,7 @@ def save_demos(demos: Any, path: str | os.PathLike) -> None:
             arrays[f"acts_{i}"] = demo.actions
         if demo.rewards is not None:
             arrays[f"rews_{i}"] = demo.rewards
-    with open(path, "wb") as fh:
+    with atomic_write(path, "wb") as fh:  # a failure leaves the previous file
         np.savez(fh, **arrays)
 
 

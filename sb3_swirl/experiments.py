@@ -197,12 +197,10 @@ def write_results(results: dict[str, Any], path: str | Path) -> None:
 
 def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path) -> None:
     """Success rate against training episodes, one line per method (the paper's Fig. 2)."""
-    import matplotlib
+    from sb3_swirl.plotting import _finish, _new_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig = _new_figure((6, 4))
+    ax = fig.add_subplot()
     labels = {"swirl_dqn": "SWIRL (SwirlDQN)", "dqn": "DQN"}
     for run in runs:
         episodes = [p["episodes"] for p in run["curve"]]
@@ -215,9 +213,7 @@ def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path)
     ax.set_title(f"{preset.env_id}: {preset.n_demos} demos")
     ax.legend(loc="lower right")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _finish(fig, path)
 
 
 def run_demo(

@@ -16,6 +16,7 @@ from matplotlib.patches import Ellipse
 
 from sb3_swirl.demos import as_demonstrations
 from swirl_wrappers import TaskModel
+from swirl_wrappers._io import atomic_write
 
 
 def _colors(n: int) -> list[Any]:
@@ -31,8 +32,11 @@ def _new_figure(figsize: tuple[float, float]) -> Figure:
 
 
 def _finish(fig: Figure, path: str | os.PathLike | None) -> Figure:
+    """Save ``fig`` atomically (in the format of the path's suffix) when ``path`` is given."""
     if path is not None:
-        fig.savefig(path, dpi=120)
+        suffix = os.path.splitext(path)[1].lstrip(".") or "png"
+        with atomic_write(path, "wb") as fh:
+            fig.savefig(fh, format=suffix, dpi=120)
     return fig
 
 

@@ -141,3 +141,92 @@ def test_train_and_evaluate_scores_the_final_policy_and_checks_the_budget():
     assert run["final_success"] == run["curve"][-1]["success_rate"]
     with pytest.raises(ValueError, match="total_timesteps"):
         train_and_evaluate("dqn", preset, total_timesteps=0, seed=0, progress=False)
+
+
+# ---------------------------------------------------------------------- outputs and Ctrl-C
+def test_fit_refuses_to_overwrite_its_own_input(tmp_path, capsys):
+    demos = tmp_path / "demos.npz"
+    assert main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "2", "-o", str(demos), "-q"]) == 0
+    before = demos.read_bytes()
+    (tmp_path / "link.npz").symlink_to(demos)
+    for output in (demos, tmp_path / "." / "demos.npz", tmp_path / "link.npz"):
+        assert main(["fit", str(demos), "-o", str(output)]) == 2
+        assert "is the input" in capsys.readouterr().err
+    assert demos.read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["demos", "sb3_swirl/ParallelParking-v0", "-n", "2", "-o", "{blocked}/demos.npz"],
+        ["fit", "{demos}", "-o", "{blocked}/task.json"],
+        ["fit", "{demos}", "-o", "{folder}"],
+        ["show", "{task}", "--plot", "{blocked}/figs"],
+        ["demo", "parking", "--out", "{blocked}/results", "-q"],
+    ],
+    ids=["demos", "fit", "fit into a folder", "show --plot", "demo --out"],
+)
+def test_an_unwritable_output_is_refused_before_any_work(tmp_path, capsys, command, monkeypatch):
+    """A path under a regular file cannot be written, even by root."""
+    from sb3_swirl.fitting import fit_task
+
+    demos = tmp_path / "demos.npz"
+    main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "2", "-o", str(demos), "-q"])
+    task = tmp_path / "task.json"
+    fit_task(load_demos(demos), random_state=0).to_json(task)
+    blocked = tmp_path / "a_file"
+    blocked.write_text("")
+    args = [
+        a.format(blocked=blocked, demos=demos, task=task, folder=tmp_path / "dir") for a in command
+    ]
+    (tmp_path / "dir").mkdir()
+    no_work_targets = (
+        "sb3_swirl.supervisors.collect_demos",
+        "sb3_swirl.fitting.fit_task",
+        "sb3_swirl.demos.load_demos",
+        "sb3_swirl.experiments.run_demo",
+        "sb3_swirl.plotting.plot_rewards",
+    )
+    for target in no_work_targets:
+        monkeypatch.setattr(target, lambda *a, **k: pytest.fail("work started"))
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "not a folder" in err or "is a directory" in err, err
+
+
+def test_ctrl_c_prints_one_line_exits_130_and_leaves_no_file(tmp_path, capsys, monkeypatch):
+    demos = tmp_path / "demos.npz"
+    assert main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "2", "-o", str(demos), "-q"]) == 0
+    capsys.readouterr()
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("sb3_swirl.fitting.fit_task", interrupted)
+    assert main(["fit", str(demos), "-o", str(tmp_path / "task.json")]) == 130
+    assert capsys.readouterr().err.strip() == "interrupted"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demos.npz"]
+
+
+def test_ctrl_c_in_the_middle_of_a_real_run(tmp_path):
+    """SIGINT to a running ``sb3-swirl demos``: exit 130, one line, no (partial) file."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "demos.npz"
+    command = ["demos", "sb3_swirl/NoisyAcrobot-v0", "-n", "500", "-o", str(out), "-q"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sb3_swirl.cli", *command],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    started = proc.stderr.readline()  # printed when the work starts, after the imports
+    assert started.startswith("collecting 500 demos"), started
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    rest = proc.stderr.read()
+    assert proc.wait(timeout=30) == 130
+    assert rest.strip() == "interrupted"
+    assert list(tmp_path.iterdir()) == []
