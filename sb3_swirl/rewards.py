@@ -12,15 +12,20 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any
+from numbers import Real
+from typing import Any, ClassVar
 
 import numpy as np
 from sklearn.base import BaseEstimator
+from sklearn.utils._param_validation import Interval, StrOptions
 
 from sb3_swirl.demos import Demonstration, as_demonstrations
-from sb3_swirl.segmentation import TransitionStateClustering, segment_boundaries
+from sb3_swirl.segmentation import (
+    StrictParamsMixin,
+    TransitionStateClustering,
+    segment_boundaries,
+)
 from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
-from swirl_wrappers._checks import is_finite_real
 
 
 def _resolve(
@@ -104,7 +109,7 @@ class RewardLearner(BaseEstimator, ABC):
         """Learn one :class:`swirl_wrappers.QuadraticReward` per segment into ``rewards_``."""
 
 
-class QuadraticRewardLearner(RewardLearner):
+class QuadraticRewardLearner(StrictParamsMixin, RewardLearner):
     """Model-free local rewards for state-only demonstrations (§6.1, eq. 1).
 
     For segment ``i`` the reward is ``R_i(x) = -(x - mu_i)^T Psi_i (x - mu_i)`` where ``mu_i``
@@ -146,6 +151,12 @@ class QuadraticRewardLearner(RewardLearner):
     True
     """
 
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "metric": [StrOptions({"mahalanobis", "euclidean"})],
+        "regularization": [Interval(Real, 0, np.inf, closed="neither")],
+        "normalize": ["boolean"],
+    }
+
     def __init__(
         self, metric: str = "mahalanobis", regularization: float = 1e-3, normalize: bool = True
     ) -> None:
@@ -171,12 +182,7 @@ class QuadraticRewardLearner(RewardLearner):
         -------
         self
         """
-        if self.metric not in ("mahalanobis", "euclidean"):
-            raise ValueError(f"metric must be 'mahalanobis' or 'euclidean', got {self.metric!r}")
-        if not (is_finite_real(self.regularization) and self.regularization > 0):
-            raise ValueError(
-                f"regularization must be a finite positive number, got {self.regularization!r}"
-            )
+        self._validate_params()
         demos = as_demonstrations(demos)
         segments, regions = segment_states(demos, segmentation, features)
         pooled = np.concatenate([s for seg in segments for s in seg])

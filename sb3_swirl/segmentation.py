@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
+from numbers import Integral, Real
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy.stats import chi2
@@ -27,11 +28,11 @@ from sklearn.decomposition import PCA
 from sklearn.kernel_approximation import Nystroem
 from sklearn.mixture import BayesianGaussianMixture, GaussianMixture
 from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import Interval, InvalidParameterError, StrOptions
 from threadpoolctl import threadpool_limits
 
 from sb3_swirl.demos import as_demonstrations, check_window
 from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
-from swirl_wrappers._checks import is_bool, is_finite_real, is_integer
 
 Indicator = Callable[[list[np.ndarray], Any], list[np.ndarray]]
 
@@ -411,7 +412,30 @@ def _overlaps(a: Region, b: Region) -> bool:
     return bool(a.contains(b.mean) or b.contains(a.mean))
 
 
-class TransitionStateClustering(BaseEstimator):
+class StrictParamsMixin:
+    """scikit-learn's parameter validation (``_parameter_constraints``), refusing a bool where
+    a number is expected: scikit-learn takes ``True`` for 1."""
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]]
+
+    def _validate_params(self) -> None:
+        super()._validate_params()  # type: ignore[misc]
+        for name, constraints in self._parameter_constraints.items():
+            value = getattr(self, name)
+            if isinstance(value, bool | np.bool_) and "boolean" not in constraints:
+                raise InvalidParameterError(
+                    f"The {name!r} parameter of {type(self).__name__} must be a number, not a "
+                    f"bool. Got {value!r} instead."
+                )
+
+
+# Finite and with a finite square and inverse square: a bandwidth of the RBF kernel.
+_SIGMA_RANGE = Interval(Real, 1e-100, 1e100, closed="both")
+_POSITIVE = Interval(Real, 0, np.inf, closed="neither")
+_COUNT = Interval(Integral, 1, None, closed="left")
+
+
+class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
     """Learn the ordered transition regions of a task from demonstrations (§5, Algorithm 1).
 
     1. Optionally map states through an approximate RBF kernel PCA (§5.3; Nyström on
@@ -530,6 +554,26 @@ class TransitionStateClustering(BaseEstimator):
     3
     """
 
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "indicator": [StrOptions(_INDICATORS), callable],
+        "window": [_COUNT, None],
+        "n_indicator_components": [_COUNT],
+        "max_indicator_samples": [_COUNT],
+        "kernel": [StrOptions({"rbf"}), None],
+        "kernel_sigma": [_SIGMA_RANGE],
+        "n_kernel_components": [_COUNT],
+        "n_landmarks": [_COUNT],
+        "n_regions_max": [_COUNT],
+        "concentration": [_POSITIVE],
+        "min_demo_fraction": [Interval(Real, 0, 1, closed="right")],
+        "confidence": [Interval(Real, 0, 1, closed="neither")],
+        "covariance_type": [StrOptions({"diag", "tied", "spherical", "full"})],
+        "reg_covar": [_POSITIVE],
+        "use_time": ["boolean"],
+        "include_goal": ["boolean"],
+        "random_state": ["random_state"],
+    }
+
     def __init__(
         self,
         indicator: str | Indicator = "gmm",
@@ -568,59 +612,6 @@ class TransitionStateClustering(BaseEstimator):
         self.include_goal = include_goal
         self.random_state = random_state
 
-    # ------------------------------------------------------------------ validation
-    def _check_params(self) -> None:
-        if not (callable(self.indicator) or self.indicator in _INDICATORS):
-            raise ValueError(
-                f"indicator must be one of {sorted(_INDICATORS)} or a callable, "
-                f"got {self.indicator!r}"
-            )
-        for name in (
-            "window",
-            "n_indicator_components",
-            "max_indicator_samples",
-            "n_kernel_components",
-            "n_landmarks",
-            "n_regions_max",
-        ):
-            value = getattr(self, name)
-            if name == "window" and value is None:
-                continue
-            if not is_integer(value, 1):
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if self.kernel not in (None, "rbf"):
-            raise ValueError(f"kernel must be None or 'rbf', got {self.kernel!r}")
-
-        def positive(v: float) -> bool:
-            return v > 0
-
-        ranges = {
-            "kernel_sigma": (positive, "> 0"),
-            "concentration": (positive, "> 0"),
-            "min_demo_fraction": (lambda v: 0 < v <= 1, "in (0, 1]"),
-            "confidence": (lambda v: 0 < v < 1, "in (0, 1)"),
-            "reg_covar": (positive, "> 0"),
-        }
-        for name, (ok, text) in ranges.items():
-            value = getattr(self, name)
-            if not (is_finite_real(value) and ok(value)):
-                raise ValueError(f"{name} must be a finite number {text}, got {value!r}")
-        # A product, not **: a float's ** raises OverflowError where * gives inf.
-        sigma2 = float(self.kernel_sigma) * float(self.kernel_sigma)
-        if not (0 < sigma2 < math.inf and math.isfinite(0.5 / sigma2)):
-            raise ValueError(
-                f"kernel_sigma is out of range: its square must be a finite number > 0, "
-                f"got {self.kernel_sigma!r}"
-            )
-        for name in ("use_time", "include_goal"):
-            if not is_bool(getattr(self, name)):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
-        if self.covariance_type not in ("diag", "tied", "spherical", "full"):
-            raise ValueError(
-                "covariance_type must be 'diag', 'tied', 'spherical' or 'full', "
-                f"got {self.covariance_type!r}"
-            )
-
     # ------------------------------------------------------------------ fitting
     def fit(self, demos: Any, y: None = None) -> TransitionStateClustering:
         """Learn the regions from demonstrations.
@@ -635,7 +626,7 @@ class TransitionStateClustering(BaseEstimator):
         -------
         self
         """
-        self._check_params()
+        self._validate_params()
         demos = as_demonstrations(demos, window=self._window)
         # The work is many small (p x p) factorisations, where BLAS threads only add
         # synchronisation overhead (4x slower measured on 2 busy cores).

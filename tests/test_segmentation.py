@@ -178,11 +178,11 @@ def test_bad_indicator_output_and_parameters_raise_value_error(three_phases):
         TransitionStateClustering(indicator=lambda s, r: [np.array([5, 10**6])] * len(s)).fit(demos)
     with pytest.raises(ValueError, match=r"steps outside demo 0 .*: \[-1\]"):
         TransitionStateClustering(indicator=lambda s, r: [np.array([-1, 5])] * len(s)).fit(demos)
-    with pytest.raises(ValueError, match="indicator must be one of"):
+    with pytest.raises(ValueError, match="'indicator' parameter of TransitionStateClustering"):
         TransitionStateClustering(indicator="hmm").fit(demos)
-    with pytest.raises(ValueError, match="window must be a positive integer"):
+    with pytest.raises(ValueError, match=r"'window' parameter .* int in the range \[1, inf\)"):
         TransitionStateClustering(window=0).fit(demos)
-    with pytest.raises(ValueError, match=r"min_demo_fraction must be a finite number in \(0, 1\]"):
+    with pytest.raises(ValueError, match=r"'min_demo_fraction' .* range \(0\.0, 1\.0\]"):
         TransitionStateClustering(min_demo_fraction=1.5).fit(demos)
     with pytest.raises(ValueError, match="no transition region is shared"):
         TransitionStateClustering(
