@@ -265,6 +265,7 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
 
         def read(key: str) -> np.ndarray:
             try:
+                _check_array_size(npz.zip, key)
                 return npz[key]
             except (OSError, EOFError, ValueError, zipfile.BadZipFile, zlib.error) as exc:
                 raise ValueError(f"{name}: cannot read {key} (corrupted?): {exc}") from exc
@@ -285,6 +286,12 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
         if n_demos.shape != () or n_demos.dtype.kind not in "iu" or int(n_demos) < 0:
             raise ValueError(f"{name}: n_demos must be one integer >= 0, got {n_demos!r}")
         n = int(n_demos)
+        n_obs = sum(key.startswith("obs_") for key in files)
+        if n > n_obs:  # checked before anything proportional to n is built
+            raise ValueError(
+                f"{name}: n_demos={n} but the file holds {n_obs} demos (obs_0, obs_1, ...): "
+                "a damaged or hand-edited file?"
+            )
         expected = {"format", "n_demos"} | {
             f"{field}_{i}" for i in range(n) for field in ("obs", "acts", "rews")
         }
@@ -308,6 +315,28 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
         return as_demonstrations(demos)
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}") from exc
+
+
+def _check_array_size(archive: zipfile.ZipFile, key: str) -> None:
+    """Raise unless the array ``key`` of an .npz archive holds the data its header claims.
+
+    Read before numpy allocates the array: a header claiming a huge shape would otherwise
+    end in a ``MemoryError``.
+    """
+    info = archive.getinfo(f"{key}.npy")
+    with archive.open(info) as fh:
+        version = np.lib.format.read_magic(fh)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+        else:
+            shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+        claimed = math.prod(shape) * dtype.itemsize
+        held = info.file_size - fh.tell()
+    if claimed > held:
+        raise ValueError(
+            f"its header claims shape {shape} of {dtype} ({claimed} bytes) but the archive "
+            f"holds {held} bytes"
+        )
 
 
 def to_imitation(demos: Any) -> list[Any]:

@@ -238,3 +238,60 @@ def test_piecewise_linear_demos_switch_where_the_direction_changes():
         v = np.diff(demo.observations, axis=0)
         changes = np.flatnonzero(np.linalg.norm(np.diff(v, axis=0), axis=1) > 1e-9) + 1
         np.testing.assert_array_equal(changes, sw)
+
+
+# ---------------------------------------------------------------------- hostile and failed files
+def _archive(path, arrays: dict, raw: dict | None = None) -> None:
+    """An .npz written member by member: ``raw`` members are given as header + bytes."""
+    import io
+    import zipfile
+
+    with zipfile.ZipFile(path, "w") as archive:
+        for key, value in arrays.items():
+            buffer = io.BytesIO()
+            np.lib.format.write_array(buffer, np.asarray(value))
+            archive.writestr(f"{key}.npy", buffer.getvalue())
+        for key, (header, data) in (raw or {}).items():
+            buffer = io.BytesIO()
+            np.lib.format.write_array_header_1_0(buffer, header)
+            archive.writestr(f"{key}.npy", buffer.getvalue() + data)
+
+
+def test_a_file_claiming_a_billion_demos_is_refused_without_allocating(tmp_path):
+    path = tmp_path / "huge.npz"
+    obs = np.zeros((5, 2))
+    _archive(path, {"format": "sb3_swirl.demos/1", "n_demos": 10**9, "obs_0": obs, "obs_1": obs})
+    with pytest.raises(ValueError, match=r"huge\.npz: n_demos=1000000000 but the file holds 2"):
+        load_demos(path)
+
+
+def test_an_array_header_claiming_more_than_the_file_holds_is_refused(tmp_path):
+    path = tmp_path / "bomb.npz"
+    header = {"descr": "<f8", "fortran_order": False, "shape": (10**6, 10**6)}
+    _archive(
+        path,
+        {"format": "sb3_swirl.demos/1", "n_demos": 2, "obs_0": np.zeros((5, 2))},
+        raw={"obs_1": (header, b"\x00" * 80)},
+    )
+    with pytest.raises(ValueError, match=r"bomb\.npz: cannot read obs_1 .*claims shape"):
+        load_demos(path)
+
+
+def test_save_demos_keeps_the_previous_file_when_a_write_fails(tmp_path, monkeypatch):
+    import os
+
+    path = tmp_path / "demos.npz"
+    first = [np.zeros((6, 2)), np.ones((7, 2))]
+    save_demos(first, path)
+    before = path.read_bytes()
+
+    def disk_full(fh, **arrays):  # half an archive goes out, then the disk is full
+        fh.write(before[: len(before) // 2])
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        save_demos([np.full((6, 2), 5.0), np.ones((7, 2))], path)
+    assert path.read_bytes() == before
+    assert os.listdir(tmp_path) == ["demos.npz"]
+    np.testing.assert_array_equal(load_demos(path)[0].observations, first[0])
