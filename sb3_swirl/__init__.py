@@ -11,7 +11,9 @@ from sb3_swirl import envs  # noqa: F401  (registers the sb3_swirl/ gymnasium en
 from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
 from sb3_swirl.demos import (
     Demonstration,
+    DemoWarning,
     as_demonstrations,
+    check_demos_agree,
     load_demos,
     save_demos,
     to_imitation,
@@ -24,12 +26,13 @@ from sb3_swirl.fitting import fit_task
 from sb3_swirl.inverse_dynamics import InverseDynamics
 from sb3_swirl.plotting import plot_rewards, plot_segments
 from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
-from sb3_swirl.segmentation import TransitionStateClustering
+from sb3_swirl.segmentation import SegmentationWarning, TransitionStateClustering
 from sb3_swirl.supervisors import collect_demos
 from sb3_swirl.vec_env import SwirlVecEnv, get_swirl_attr, make_swirl_env
 from swirl_wrappers import RewardConfig, SwirlVectorWrapper, SwirlWrapper, TaskModel
 
 __all__ = [
+    "DemoWarning",
     "Demonstration",
     "InverseDynamics",
     "NoisyAcrobotEnv",
@@ -39,6 +42,7 @@ __all__ = [
     "RewardConfig",
     "RewardLearner",
     "SegmentProgressCallback",
+    "SegmentationWarning",
     "SwirlDQN",
     "SwirlVecEnv",
     "SwirlVectorWrapper",
@@ -47,6 +51,7 @@ __all__ = [
     "TaskModel",
     "TransitionStateClustering",
     "as_demonstrations",
+    "check_demos_agree",
     "collect_demos",
     "fit_task",
     "get_swirl_attr",

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 import zipfile
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
@@ -209,6 +210,86 @@ def check_window(states: Sequence[np.ndarray], window: int) -> None:
                 f"demo {i} is shorter than the window: it has {len(x)} states, "
                 f"window={window} needs at least {need}"
             )
+
+
+class DemoWarning(UserWarning):
+    """A demonstration differs strongly from the others (another sampling rate or speed?)."""
+
+
+# A demo whose typical step or length differs from the other demos' by more than this factor
+# is warned about (the README has how it was chosen and checked).
+_RATE_FACTOR = 3.0
+# An entry farther from its dimension's median than this many times the dimension's spread is
+# a corrupted value, not data.
+_ABSURD_FACTOR = 1e6
+
+
+def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
+    """Check that demonstrations look like samples of one task at one rate.
+
+    * **Absurd values** are an error: an entry farther from its dimension's median than
+      ``1e6`` times the dimension's spread (the 99th percentile of ``|x - median|`` over all
+      states, or 1 where that is 0). One such value would dominate the scale of its dimension
+      and silently change the segmentation.
+    * **Another rate** is a warning (:class:`DemoWarning`): a demo whose typical step (the
+      median of ``||s_{t+1} - s_t||``, each dimension divided by its spread) or whose number
+      of steps differs from the median of the other demos' by more than a factor of 3, as a
+      demo recorded at another sampling rate does. The windowed transition indicators
+      compare steps across demos, so such a demo can merge or hide segments.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+
+    Returns
+    -------
+    list of str
+        The warnings issued (empty when the demos agree).
+
+    Raises
+    ------
+    ValueError
+        Naming the demo, step and dimension of an absurd value.
+    """
+    states = [d.observations for d in demos]
+    pooled = np.concatenate(states)
+    centre = np.median(pooled, axis=0)
+    spread = np.percentile(np.abs(pooled - centre), 99, axis=0)
+    spread[spread == 0] = 1.0
+    for n, x in enumerate(states):
+        far = np.abs(x - centre) > _ABSURD_FACTOR * spread
+        if far.any():
+            step, dim = (int(v) for v in np.argwhere(far)[0])
+            raise ValueError(
+                f"demo {n}: step {step}, dimension {dim} holds {x[step, dim]:.3g}, "
+                f"{abs(x[step, dim] - centre[dim]) / spread[dim]:.1e} times the spread of that "
+                f"dimension over all demos ({spread[dim]:.3g} around {centre[dim]:.3g}): a "
+                "corrupted value? Fix or drop the demo"
+            )
+    steps = np.array(
+        [np.median(np.linalg.norm(np.diff(x / spread, axis=0), axis=1)) for x in states]
+    )
+    lengths = np.array([len(x) - 1 for x in states], dtype=np.float64)
+    messages = []
+    for n in range(len(states)):
+        for what, values, why in (
+            ("typical step", steps, "recorded at another sampling rate, or far faster or slower"),
+            ("number of steps", lengths, "incomplete, or recorded at another sampling rate"),
+        ):
+            others = np.median(np.delete(values, n))
+            if others <= 0 or values[n] <= 0:
+                continue
+            factor = values[n] / others
+            if max(factor, 1 / factor) > _RATE_FACTOR:
+                ratio = f"{factor:.2g} times" if factor > 1 else f"1/{1 / factor:.2g} of"
+                messages.append(
+                    f"demo {n}: its {what} is {ratio} the other demos' (median): {why}? "
+                    "The segmentation compares the demos step by step"
+                )
+                break
+    for message in messages:
+        warnings.warn(message, DemoWarning, stacklevel=3)
+    return messages
 
 
 def save_demos(demos: Any, path: str | os.PathLike) -> None:

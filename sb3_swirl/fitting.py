@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -12,7 +13,7 @@ from sklearn.base import clone
 
 from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
-from sb3_swirl.segmentation import TransitionStateClustering
+from sb3_swirl.segmentation import SegmentationWarning, TransitionStateClustering
 from swirl_wrappers import TaskModel
 from swirl_wrappers.task import angle_features, check_angles
 
@@ -192,6 +193,24 @@ def fit_task(
 
     report(f"learning transition regions from {len(demos)} demonstrations")
     segmenter.fit(demos)
+    # Candidate regions that most demos share but a few do not: the few are worth a look (a
+    # demo at another rate, one that skipped a phase). Where many demos disagree, the drops
+    # are the demonstrators' variety, recorded in the metadata only.
+    few = max(1, len(demos) // 4)
+    lost = sorted(
+        (d for d in segmenter.dropped_regions_ if 0 < len(d["demos"]) <= few),
+        key=lambda d: d["time"],
+    )
+    if lost:
+        message = (
+            f"dropped {len(lost)} candidate region(s) that all but a few demos share: "
+            + "; ".join(f"near step {d['time']:.0f}, {d['reason']}" for d in lost)
+            + f". The task has {len(segmenter.regions_)} segment(s); if those demos differ "
+            "from the others (another rate, a skipped phase), fix or drop them, or lower "
+            "min_demo_fraction"
+        )
+        report(message)
+        warnings.warn(message, SegmentationWarning, stacklevel=2)
     report(f"learning local rewards for {len(segmenter.regions_)} segments")
     learner.fit(demos, segmenter)
     lengths = [len(d) for d in demos]
@@ -204,6 +223,7 @@ def fit_task(
         "angles": None if angles is None else [list(a) for a in angles],
         "random_state": _jsonable(random_state),
         "segmentation": _record(segmenter),
+        "dropped_regions": segmenter.dropped_regions_,
         "reward": _record(learner),
     }
     task = TaskModel(

@@ -31,7 +31,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, InvalidParameterError, StrOptions
 from threadpoolctl import threadpool_limits
 
-from sb3_swirl.demos import as_demonstrations, check_window
+from sb3_swirl.demos import as_demonstrations, check_demos_agree, check_window
 from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
 
 Indicator = Callable[[list[np.ndarray], Any], list[np.ndarray]]
@@ -412,6 +412,10 @@ def _overlaps(a: Region, b: Region) -> bool:
     return bool(a.contains(b.mean) or b.contains(a.mean))
 
 
+class SegmentationWarning(UserWarning):
+    """The segmentation dropped candidate regions that some demos share (see the message)."""
+
+
 class StrictParamsMixin:
     """scikit-learn's parameter validation (``_parameter_constraints``), refusing a bool where
     a number is expected: scikit-learn takes ``True`` for 1."""
@@ -515,8 +519,8 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         Added to each region covariance, relative to the variance of all demonstration states
         along each axis; keeps regions built from few or identical points well posed. With
         very few demos a region rests on one point per demo, which can agree along an axis
-        far more than new episodes will: raise it (the parking preset, 5 demos, uses 0.1;
-        at 1e-3 half of its episodes never entered the first region).
+        far more than new episodes will: raise it (e.g. to 0.1) so that new start states
+        still enter the regions.
     use_time : bool, default False
         Give each region a time window (the range of its transition times, widened on each
         side by that range or ``window`` steps, whichever is larger). Off by default: an RL
@@ -539,6 +543,10 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
     region_transitions_ : list of list of (demo, step)
         The representative transitions each transition region was built from (empty for the
         goal region).
+    dropped_regions_ : list of dict
+        The candidate regions the fit dropped, each with its median transition ``"time"``,
+        ``"centre"``, the ``"reason"`` and the ``"demos"`` concerned (those without a
+        transition there, or that do not reach it in order).
     feature_map_ : RBFFeatures or None
         The kernel feature map when ``kernel="rbf"``.
     n_demos_ : int
@@ -628,8 +636,9 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         """
         self._validate_params()
         demos = as_demonstrations(demos, window=self._window)
+        check_demos_agree(demos)
         # The work is many small (p x p) factorisations, where BLAS threads only add
-        # synchronisation overhead (4x slower measured on 2 busy cores).
+        # synchronisation overhead.
         with threadpool_limits(limits=1, user_api="blas"):
             return self._fit(demos)
 
@@ -648,27 +657,30 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         pooled = np.concatenate(x)
         reg = self.reg_covar * np.diag(_scale(pooled) ** 2)
         threshold = float(chi2.ppf(self.confidence, df=pooled.shape[1]))
+        self.dropped_regions_: list[dict[str, Any]] = []
         candidates = self._cluster(x, int(seeds[2]))
-        regions, members = [], []
-        for times, points, reps in candidates:
-            region = self._region(points, reg, threshold, times)
-            regions.append(region)
-            members.append(reps)
+        regions = [self._region(points, reg, threshold, times) for times, points, _ in candidates]
+        members = [reps for _, _, reps in candidates]
+        times = [t for t, _, _ in candidates]
         if self.include_goal:
-            goal = self._region(
-                np.array([s[-1] for s in x]),
-                reg,
-                threshold,
-                np.array([len(s) - 1 for s in x], dtype=np.float64),
-            )
-            keep = [i for i, r in enumerate(regions) if not _overlaps(r, goal)]
+            ends = np.array([len(s) - 1 for s in x], dtype=np.float64)
+            goal = self._region(np.array([s[-1] for s in x]), reg, threshold, ends)
+            keep = []
+            for i, region in enumerate(regions):
+                if _overlaps(region, goal):
+                    self._drop(times[i], region.mean, "marks the same place as the goal")
+                else:
+                    keep.append(i)
             regions = [regions[i] for i in keep] + [goal]
             members = [members[i] for i in keep] + [[]]
+            times = [times[i] for i in keep] + [ends]
         kept: list[int] = []
         for i, region in enumerate(regions):
-            if not any(_overlaps(region, regions[j]) for j in kept):
+            if any(_overlaps(region, regions[j]) for j in kept):
+                self._drop(times[i], region.mean, "marks the same place as an earlier region")
+            else:
                 kept.append(i)
-        kept = self._prune_unreached(x, [regions[i] for i in kept], kept)
+        kept = self._prune_unreached(x, [regions[i] for i in kept], kept, times)
         if not kept:
             raise ValueError(
                 f"no transition region is shared by at least "
@@ -702,8 +714,21 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
                 "indicator or window"
             )
 
+    def _drop(
+        self, times: np.ndarray, points: np.ndarray, reason: str, demos: list[int] | None = None
+    ) -> None:
+        """Record a dropped candidate region in ``dropped_regions_``."""
+        self.dropped_regions_.append(
+            {
+                "time": float(np.median(times)),
+                "centre": np.atleast_2d(points).mean(axis=0).tolist(),
+                "reason": reason,
+                "demos": demos or [],
+            }
+        )
+
     def _prune_unreached(
-        self, x: list[np.ndarray], regions: list[Region], ids: list[int]
+        self, x: list[np.ndarray], regions: list[Region], ids: list[int], times: list
     ) -> list[int]:
         """Drop regions until enough demonstrations reach every region in order.
 
@@ -721,12 +746,20 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         need = self._min_demos(len(x))
         removable = len(regions) - (1 if self.include_goal else 0)
 
-        def n_complete(subset: list[int]) -> int:
+        def incomplete(subset: list[int]) -> list[int]:
+            """Position (in ``subset``) of the first region each demo misses; -1: none."""
             if not subset:
-                return 0
+                return [0] * len(x)
             task = _regions_task(_make_disjoint([regions[j] for j in subset]))
-            bounds = [_reach_steps(task, s) for s in x]
-            return sum(int(b[0] > 0 and b[-1] >= 0) for b in bounds)
+            missed = []
+            for s in x:
+                b = _reach_steps(task, s)
+                b[0] = -1 if b[0] == 0 else b[0]  # the start state never counts
+                missed.append(int(np.argmax(b < 0)) if (b < 0).any() else -1)
+            return missed
+
+        def n_complete(subset: list[int]) -> int:
+            return incomplete(subset).count(-1)
 
         alive = list(range(len(regions)))
         while n_complete(alive) < need and removable > 0:
@@ -734,7 +767,17 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
             if not candidates:
                 break
             scores = [n_complete([j for j in alive if j != c]) for c in candidates]
-            alive.remove(candidates[int(np.argmax(scores))])
+            worst = candidates[int(np.argmax(scores))]
+            position = alive.index(worst)
+            demos = [n for n, m in enumerate(incomplete(alive)) if m == position]
+            self._drop(
+                times[ids[worst]],
+                regions[worst].mean,
+                "not reached in order (after the previous region, not at the start) by "
+                f"demos {demos}",
+                demos,
+            )
+            alive.remove(worst)
         return [ids[j] for j in alive]
 
     def transform_states(self, states: np.ndarray) -> np.ndarray:
@@ -858,7 +901,16 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         found = []
         for c in np.unique(state_labels):
             members = np.flatnonzero(state_labels == c)
-            if len(np.unique(owner[members])) < need:
+            here = np.unique(owner[members])
+            if len(here) < need:
+                without = sorted(set(range(len(x))) - set(here.tolist()))
+                self._drop(
+                    steps[members],
+                    points[members],
+                    f"only {len(here)} of {len(x)} demos have a transition there ({need} "
+                    f"needed; none from demos {without})",
+                    without,
+                )
                 continue
             groups = [(members, state_proba[members, c])]
             if len(members) > 1:

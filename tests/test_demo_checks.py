@@ -1,0 +1,104 @@
+"""Demos that do not match the rest: warned about, named; absurd values refused; the fit says
+which candidate regions it dropped and which demos lack them."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from sb3_swirl import collect_demos, fit_task
+from sb3_swirl.demos import (
+    DemoWarning,
+    as_demonstrations,
+    check_demos_agree,
+    make_piecewise_linear_demos,
+)
+from sb3_swirl.segmentation import SegmentationWarning
+
+PARKING = "sb3_swirl/ParallelParking-v0"
+
+
+@pytest.fixture(scope="module")
+def parking_states():
+    return [d.observations for d in collect_demos(PARKING, 5, seed=0)]
+
+
+def _finer(x: np.ndarray, k: int) -> np.ndarray:
+    """``x`` resampled ``k`` times finer, by linear interpolation."""
+    t, fine = np.arange(len(x)), np.linspace(0, len(x) - 1, (len(x) - 1) * k + 1)
+    return np.stack([np.interp(fine, t, x[:, j]) for j in range(x.shape[1])], axis=1)
+
+
+def _agree(demos) -> list[str]:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any warning fails the caller
+        return check_demos_agree(as_demonstrations(demos))
+
+
+@pytest.mark.parametrize(
+    ("resample", "said"),
+    [(lambda x: x[::7], r"[5-9][.\d]* times"), (lambda x: _finer(x, 10), "1/10 of")],
+    ids=["7x coarser", "10x finer"],
+)
+def test_a_demo_at_another_sampling_rate_is_named(parking_states, resample, said):
+    demos = [*parking_states[:2], resample(parking_states[2]), *parking_states[3:]]
+    with pytest.warns(DemoWarning, match=rf"demo 2: its typical step is .*{said}") as record:
+        check_demos_agree(as_demonstrations(demos))
+    assert len(record) == 1  # only the odd demo
+
+
+def test_ordinary_demo_sets_raise_no_warning(parking_states):
+    assert _agree(parking_states) == []
+    for seed in (3, 4):  # ragged lengths, phases of different speeds, many dims and noise
+        assert (
+            _agree(make_piecewise_linear_demos(phase_length=(20, 60), random_state=seed)[0]) == []
+        )
+        assert (
+            _agree(make_piecewise_linear_demos(n_demos=4, dim=10, noise=0.2, random_state=seed)[0])
+            == []
+        )
+    constant = [np.column_stack([d, np.zeros(len(d))]) for d in parking_states]
+    assert _agree(constant) == []  # a constant dimension is no outlier
+
+
+def test_an_incomplete_demo_is_named(parking_states):
+    demos = [*parking_states[:4], parking_states[4][:8]]
+    with pytest.warns(DemoWarning, match=r"demo 4: its number of steps .* incomplete"):
+        check_demos_agree(as_demonstrations(demos))
+
+
+def test_an_absurd_value_is_an_error_naming_demo_step_and_dimension(parking_states):
+    corrupted = [x.copy() for x in parking_states]
+    corrupted[3][17, 2] = 1e150  # finite, below the overflow limit
+    with pytest.raises(ValueError, match=r"demo 3: step 17, dimension 2 holds 1e\+150"):
+        check_demos_agree(as_demonstrations(corrupted))
+    with pytest.raises(ValueError, match="demo 3: step 17"):  # and the fit does not go on
+        fit_task(corrupted, reg_covar=0.1, random_state=0)
+
+
+def test_the_fit_says_which_regions_it_dropped_and_which_demos_lack_them(parking_states):
+    coarse = [*parking_states[:4], parking_states[4][::7]]
+    with (
+        pytest.warns(DemoWarning, match="demo 4"),
+        pytest.warns(SegmentationWarning, match=r"dropped 3 .*none from demos \[4\]") as record,
+    ):
+        task = fit_task(coarse, reg_covar=0.1, random_state=0)
+    message = next(str(w.message) for w in record if w.category is SegmentationWarning)
+    assert "The task has 1 segment" in message and task.n_segments == 1
+    dropped = task.metadata["dropped_regions"]
+    assert len(dropped) == 3 and all(d["demos"] == [4] for d in dropped)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert fit_task(parking_states, reg_covar=0.1, random_state=0).n_segments == 4
+
+
+def test_a_demo_that_skips_a_phase_is_named():
+    demos, switches = make_piecewise_linear_demos(n_demos=6, random_state=0)
+    x = demos[5].observations.copy()
+    first = switches[5][0]
+    # demo 5 turns the other way at the first corner: it never visits the second one
+    x[first:] = x[first] - (x[first:] - x[first])
+    with pytest.warns(SegmentationWarning, match=r"none from demos \[5\]"):
+        fit_task([*demos[:5], x], random_state=0)
