@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).parent
-FAST = ["bench_wrappers.py", "bench_envs.py", "bench_fit.py"]
+FAST = ["bench_wrappers.py", "bench_envs.py", "bench_fit.py", "bench_demo_checks.py"]
 SLOW = ["sample_efficiency.py"]
 
 

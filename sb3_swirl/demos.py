@@ -232,10 +232,11 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
       states, or 1 where that is 0). One such value would dominate the scale of its dimension
       and silently change the segmentation.
     * **Another rate** is a warning (:class:`DemoWarning`): a demo whose typical step (the
-      median of ``||s_{t+1} - s_t||``, each dimension divided by its spread) or whose number
-      of steps differs from the median of the other demos' by more than a factor of 3, as a
-      demo recorded at another sampling rate does. The windowed transition indicators
-      compare steps across demos, so such a demo can merge or hide segments.
+      median of ``||s_{t+1} - s_t||``, each dimension divided by its spread) differs from the
+      median of the other demos' by more than a factor of 3 while its number of steps differs
+      by more than 2 the other way, as a demo recorded at another sampling rate does; or whose
+      number of steps alone differs by more than 3 (incomplete?). The windowed transition
+      indicators compare steps across demos, so such a demo can merge or hide segments.
 
     Parameters
     ----------
@@ -252,10 +253,7 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
         Naming the demo, step and dimension of an absurd value.
     """
     states = [d.observations for d in demos]
-    pooled = np.concatenate(states)
-    centre = np.median(pooled, axis=0)
-    spread = np.percentile(np.abs(pooled - centre), 99, axis=0)
-    spread[spread == 0] = 1.0
+    centre, spread = _robust_scale(states)
     for n, x in enumerate(states):
         far = np.abs(x - centre) > _ABSURD_FACTOR * spread
         if far.any():
@@ -266,30 +264,53 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
                 f"dimension over all demos ({spread[dim]:.3g} around {centre[dim]:.3g}): a "
                 "corrupted value? Fix or drop the demo"
             )
-    steps = np.array(
-        [np.median(np.linalg.norm(np.diff(x / spread, axis=0), axis=1)) for x in states]
-    )
-    lengths = np.array([len(x) - 1 for x in states], dtype=np.float64)
     messages = []
-    for n in range(len(states)):
-        for what, values, why in (
-            ("typical step", steps, "recorded at another sampling rate, or far faster or slower"),
-            ("number of steps", lengths, "incomplete, or recorded at another sampling rate"),
-        ):
-            others = np.median(np.delete(values, n))
-            if others <= 0 or values[n] <= 0:
-                continue
-            factor = values[n] / others
-            if max(factor, 1 / factor) > _RATE_FACTOR:
-                ratio = f"{factor:.2g} times" if factor > 1 else f"1/{1 / factor:.2g} of"
-                messages.append(
-                    f"demo {n}: its {what} is {ratio} the other demos' (median): {why}? "
-                    "The segmentation compares the demos step by step"
-                )
-                break
+    for n, (step, length) in enumerate(_rate_ratios(states, spread)):
+        if _off(step, _RATE_FACTOR) and _off(length, 2.0) and (step > 1) != (length > 1):
+            # steps and length off in opposite directions: the time axis is scaled
+            what, factor, why = "typical step", step, "recorded at another sampling rate"
+        elif _off(length, _RATE_FACTOR):
+            what, factor, why = "number of steps", length, "incomplete, or at another rate"
+        else:
+            continue
+        ratio = f"{factor:.2g} times" if factor > 1 else f"1/{1 / factor:.2g} of"
+        messages.append(
+            f"demo {n}: its {what} is {ratio} the other demos' (median): {why}? The "
+            "segmentation compares the demos step by step"
+        )
     for message in messages:
         warnings.warn(message, DemoWarning, stacklevel=3)
     return messages
+
+
+def _off(ratio: float, factor: float) -> bool:
+    """Whether ``ratio`` is more than ``factor`` away from 1, either way."""
+    return bool(np.isfinite(ratio) and max(ratio, 1 / ratio) > factor)
+
+
+def _robust_scale(states: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Per dimension over all states: the median, and the 99th percentile of the distance to
+    it (1 where that is 0), which a few corrupted values do not move."""
+    pooled = np.concatenate(states)
+    centre = np.median(pooled, axis=0)
+    spread = np.percentile(np.abs(pooled - centre), 99, axis=0)
+    spread[spread == 0] = 1.0
+    return centre, spread
+
+
+def _rate_ratios(states: Sequence[np.ndarray], spread: np.ndarray) -> np.ndarray:
+    """Each demo's typical step and number of steps over the median of the other demos'.
+
+    The typical step is the median of ``||s_{t+1} - s_t||`` with each dimension divided by
+    ``spread``. Returns shape (n_demos, 2); NaN where a median is 0.
+    """
+    steps = [np.median(np.linalg.norm(np.diff(x / spread, axis=0), axis=1)) for x in states]
+    values = np.column_stack([steps, [len(x) - 1 for x in states]]).astype(np.float64)
+    others = np.array([np.median(np.delete(values, n, axis=0), axis=0) for n in range(len(values))])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratios = values / others
+    ratios[~np.isfinite(ratios) | (ratios == 0)] = np.nan
+    return ratios
 
 
 def save_demos(demos: Any, path: str | os.PathLike) -> None:
