@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 from pathlib import Path
+from typing import Any
 
 from rich.console import Console
 from rich.markup import escape
@@ -242,11 +244,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(message: Warning | str, *args: Any, **kwargs: Any) -> None:
+    """Warnings (a demo that differs from the others, dropped regions) as one line each."""
+    console.print(f"[yellow]warning:[/] {escape(str(message))}", soft_wrap=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sb3-swirl`` command."""
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return args.func(args)
     except (ValueError, OSError) as exc:  # OSError: a path that is a folder, unwritable...
         # soft_wrap: never break a path a user may copy; escape: paths may contain [brackets]
         console.print(f"[bold red]error:[/] {escape(str(exc))}", soft_wrap=True)

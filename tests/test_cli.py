@@ -230,3 +230,17 @@ def test_ctrl_c_in_the_middle_of_a_real_run(tmp_path):
     assert proc.wait(timeout=30) == 130
     assert rest.strip() == "interrupted"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_fit_reports_a_demo_at_another_rate_as_one_warning_line(tmp_path, capsys):
+    from sb3_swirl.demos import save_demos
+
+    path = tmp_path / "demos.npz"
+    assert main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "5", "-o", str(path), "-q"]) == 0
+    states = [d.observations for d in load_demos(path)]
+    save_demos([*states[:4], states[4][::7]], path)
+    capsys.readouterr()
+    assert main(["fit", str(path), "-o", str(tmp_path / "task.json"), "--reg-covar", "0.1"]) == 0
+    warned = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning:")]
+    assert warned[0].startswith("warning: demo 4: its typical step is")
+    assert "none from demos [4]" in warned[1]
