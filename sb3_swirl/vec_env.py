@@ -22,7 +22,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvO
 
 from swirl_wrappers import Lifter, RewardConfig, SegmentTracker, SwirlWrapper, TaskModel
 from swirl_wrappers._validation import check_int
-from swirl_wrappers.wrappers import SEGMENT_KEY, SEGMENT_REWARD_KEY, TASK_REWARD_KEY
+from swirl_wrappers.wrappers import SEGMENT_KEY, SEGMENT_REWARD_KEY, TASK_REWARD_KEY, TrackedTask
 
 __all__ = ["SwirlVecEnv", "get_swirl_attr", "make_swirl_env"]
 
@@ -31,7 +31,7 @@ __all__ = ["SwirlVecEnv", "get_swirl_attr", "make_swirl_env"]
 SWIRL_ATTRIBUTES = ("task", "reward_config", "terminate_on_completion")
 
 
-class SwirlVecEnv(VecEnvWrapper):
+class SwirlVecEnv(TrackedTask, VecEnvWrapper):
     """Track the SWIRL segment of every sub-environment and return the segment rewards.
 
     The Stable-Baselines3 counterpart of :class:`swirl_wrappers.SwirlWrapper`, computed for all
@@ -109,16 +109,6 @@ class SwirlVecEnv(VecEnvWrapper):
         self.lifter = Lifter(venv.observation_space, task, state_key)
         self.tracker = SegmentTracker(task, reward_config, num_envs=venv.num_envs)
         super().__init__(venv, observation_space=self.lifter.observation_space)
-
-    terminate_on_completion = False
-
-    @property
-    def task(self) -> TaskModel:
-        return self.tracker.task
-
-    @property
-    def reward_config(self) -> RewardConfig:
-        return self.tracker.config
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         if attr_name in SWIRL_ATTRIBUTES:

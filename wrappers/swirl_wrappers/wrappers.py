@@ -151,6 +151,25 @@ class Lifter:
         return {**obs, SEGMENT_KEY: one_hot.copy()}
 
 
+class TrackedTask:
+    """The task and settings of a wrapper's :class:`SegmentTracker` (``self.tracker``), as the
+    attributes every SWIRL wrapper exposes."""
+
+    tracker: SegmentTracker
+
+    @property
+    def task(self) -> TaskModel:
+        return self.tracker.task
+
+    @property
+    def reward_config(self) -> RewardConfig:
+        return self.tracker.config
+
+    @property
+    def terminate_on_completion(self) -> bool:
+        return self.tracker.terminate_on_completion
+
+
 def _refuse_normalised_states(env: Any, wrapper: str) -> None:
     """Raise if observation normalisation sits below a SWIRL wrapper: the task's regions live
     in the raw observation space, so normalised states would be segmented wrongly."""
@@ -165,7 +184,7 @@ def _refuse_normalised_states(env: Any, wrapper: str) -> None:
         env = env.env
 
 
-class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
+class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Track the segment of a SWIRL proxy task and reward the agent with its local reward.
 
     The observation gets a one-hot segment index appended (Box observations) or a ``"segment"``
@@ -248,18 +267,6 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         )
 
     @property
-    def task(self) -> TaskModel:
-        return self.tracker.task
-
-    @property
-    def reward_config(self) -> RewardConfig:
-        return self.tracker.config
-
-    @property
-    def terminate_on_completion(self) -> bool:
-        return self.tracker.terminate_on_completion
-
-    @property
     def segment(self) -> int:
         return int(self.tracker.index)
 
@@ -286,7 +293,7 @@ class SwirlWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return self.lifter.lift(obs, segment), reward, bool(terminated), truncated, info
 
 
-class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
+class SwirlVectorWrapper(TrackedTask, VectorWrapper, gym.utils.RecordConstructorArgs):
     """:class:`SwirlWrapper` for gymnasium vector environments, vectorised across sub-envs.
 
     Handles the three autoreset modes of gymnasium 1.x: ``NEXT_STEP`` (the default: the step
@@ -350,14 +357,6 @@ class SwirlVectorWrapper(VectorWrapper, gym.utils.RecordConstructorArgs):
         self.single_observation_space = self.lifter.observation_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
-
-    @property
-    def task(self) -> TaskModel:
-        return self.tracker.task
-
-    @property
-    def reward_config(self) -> RewardConfig:
-        return self.tracker.config
 
     def reset(
         self,
