@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from sb3_swirl.experiments import rollouts_to_success
+from sb3_swirl.experiments import rollouts_to_success, write_results
 
 RATIO_TARGETS = {"parking": (0.15, 0.10), "acrobot": (0.3,)}
 ALGOS = ("swirl_dqn", "dqn")
@@ -276,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         results["training_wall_s"] = time.perf_counter() - start
     out.mkdir(parents=True, exist_ok=True)
-    (out / name).write_text(json.dumps(results, indent=1))
+    write_results(results, out / name)
     print(f"wrote {out / name}")
     return 0
 

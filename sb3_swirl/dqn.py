@@ -284,6 +284,7 @@ class SwirlDQN(DQN):
                 "the new environment's proxy task differs from the one this model was built "
                 "with (model.task); wrap the env with model.task, or start a new model"
             )
+        self._take_task(None)  # and its reward settings, which replay the demos
 
     # ------------------------------------------------------------------ hooks
     def _setup_learn(self, *args: Any, **kwargs: Any) -> tuple[int, Any]:
