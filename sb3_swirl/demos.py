@@ -423,9 +423,16 @@ def _check_array_size(archive: zipfile.ZipFile, key: str) -> None:
     """Raise unless the array ``key`` of an .npz archive holds the data its header claims.
 
     Read before numpy allocates the array: a header claiming a huge shape would otherwise
-    end in a ``MemoryError``.
+    end in a ``MemoryError``. The member's own sizes are bounded by the archive's (no member is
+    larger than the file, and deflate expands at most about 1032 times).
     """
     info = archive.getinfo(f"{key}.npy")
+    archive_size = archive.fp.seek(0, os.SEEK_END) if archive.fp is not None else info.file_size
+    if info.compress_size > archive_size or info.file_size > 1100 * info.compress_size:
+        raise ValueError(
+            f"its sizes in the archive's directory ({info.compress_size} bytes stored, "
+            f"{info.file_size} unpacked) are impossible for a {archive_size}-byte file"
+        )
     with archive.open(info) as fh:
         version = np.lib.format.read_magic(fh)
         if version == (1, 0):

@@ -295,3 +295,22 @@ def test_save_demos_keeps_the_previous_file_when_a_write_fails(tmp_path, monkeyp
     assert path.read_bytes() == before
     assert os.listdir(tmp_path) == ["demos.npz"]
     np.testing.assert_array_equal(load_demos(path)[0].observations, first[0])
+
+
+def test_an_archive_lying_about_its_member_sizes_is_refused(tmp_path):
+    """The directory of the zip claims a member far larger than the file could unpack to."""
+    import struct
+
+    path = tmp_path / "liar.npz"
+    header = {"descr": "<f8", "fortran_order": False, "shape": (20_000, 20_000)}
+    _archive(
+        path,
+        {"format": "sb3_swirl.demos/1", "n_demos": 2, "obs_0": np.zeros((5, 2))},
+        raw={"obs_1": (header, b"\x00" * 80)},
+    )
+    data = bytearray(path.read_bytes())
+    entry = data.rindex(b"PK\x01\x02")  # the last member's central directory entry: obs_1
+    data[entry + 24 : entry + 28] = struct.pack("<I", 0xFFFFFFFE)  # its unpacked size
+    path.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match=r"liar\.npz: cannot read obs_1 .*impossible"):
+        load_demos(path)
