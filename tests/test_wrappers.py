@@ -720,10 +720,10 @@ def test_one_episode_returns_python_numbers():
 
 
 # ----------------------------------------------------------------------- subprocess workers
-@pytest.mark.parametrize("start_method", ["spawn", "forkserver"])
-def test_make_swirl_env_runs_in_fresh_worker_processes(start_method):
-    """Workers started fresh know nothing of sb3_swirl: the factory imports it there, so the
-    sb3_swirl/ ids resolve (gymnasium no longer loads plugin entry points)."""
+def test_make_swirl_env_runs_in_fresh_worker_processes():
+    """Workers started fresh (``spawn``) know nothing of sb3_swirl: the factory imports it
+    there, so the sb3_swirl/ ids resolve (gymnasium no longer loads plugin entry points). SB3's
+    default start method, ``forkserver``, is the next test's."""
     from sb3_swirl import make_swirl_env
 
     task = TaskModel(
@@ -735,7 +735,7 @@ def test_make_swirl_env_runs_in_fresh_worker_processes(start_method):
         n_envs=2,
         seed=0,
         vec_env_cls=SubprocVecEnv,
-        vec_env_kwargs={"start_method": start_method},
+        vec_env_kwargs={"start_method": "spawn"},
     )
     try:
         assert venv.reset().shape == (2, 4 + task.n_indices)
@@ -747,7 +747,8 @@ def test_make_swirl_env_runs_in_fresh_worker_processes(start_method):
 
 
 def test_make_swirl_env_with_subprocesses_from_python_c(tmp_path):
-    """The user's case: a script run with ``python -c`` (no importable __main__)."""
+    """The user's case: a script run with ``python -c`` (no importable __main__), workers
+    started by SB3's default method (``forkserver``)."""
     TaskModel([Region([0.0], [[1.0]], 4.0)], [QuadraticReward([0.0], [[1.0]])], dims=(0,)).to_json(
         tmp_path / "task.json"
     )
