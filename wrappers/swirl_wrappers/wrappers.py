@@ -380,7 +380,8 @@ class SwirlVectorWrapper(TrackedTask, VectorWrapper, gym.utils.RecordConstructor
         stepped = np.ones(self.num_envs, dtype=bool)  # rows whose info is a step's
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             # The rows done last step hold reset observations: no transition, a reset's info.
-            restart, stepped = self._autoreset, ~self._autoreset
+            if self._autoreset.any():
+                restart, stepped = self._autoreset, ~self._autoreset
             self._autoreset = done
         elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             # A done row holds the next episode's first observation; the transition ended in
