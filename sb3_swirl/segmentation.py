@@ -762,14 +762,15 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
             return incomplete(subset).count(-1)
 
         alive = list(range(len(regions)))
-        while n_complete(alive) < need and removable > 0:
+        missed = incomplete(alive)
+        while missed.count(-1) < need and removable > 0:
             candidates = [j for j in alive if j < removable]
             if not candidates:
                 break
             scores = [n_complete([j for j in alive if j != c]) for c in candidates]
             worst = candidates[int(np.argmax(scores))]
             position = alive.index(worst)
-            demos = [n for n, m in enumerate(incomplete(alive)) if m == position]
+            demos = [n for n, m in enumerate(missed) if m == position]
             self._drop(
                 times[ids[worst]],
                 regions[worst].mean,
@@ -778,6 +779,7 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
                 demos,
             )
             alive.remove(worst)
+            missed = incomplete(alive)
         return [ids[j] for j in alive]
 
     def transform_states(self, states: np.ndarray) -> np.ndarray:
