@@ -114,6 +114,19 @@ def test_collect_demos_on_parking():
         assert len(demo) <= 200
 
 
+def test_collect_demos_returns_the_parking_supervisors_phases():
+    demos, phases = collect_demos(PARKING, 2, seed=0, return_phases=True)
+    again = collect_demos(PARKING, 2, seed=0)
+    for demo, phase, same in zip(demos, phases, again, strict=True):
+        np.testing.assert_array_equal(demo.observations, same.observations)
+        assert phase.shape == (len(demo),) and phase.dtype == np.int64
+        # forward, reverse in, reverse out, final, in that order (a late re-plan may restart)
+        firsts = [int(np.argmax(phase == p)) for p in range(4) if (phase == p).any()]
+        assert phase[0] == 0 and firsts == sorted(firsts) and len(firsts) >= 3
+    with pytest.raises(ValueError, match="does not plan in phases"):
+        collect_demos(ACROBOT, 1, seed=0, return_phases=True)
+
+
 def test_collect_demos_progress_bar(capsys):
     demos = collect_demos(PARKING, 1, seed=0, progress=True)
     assert len(demos) == 1

@@ -6,6 +6,7 @@ Every supervisor has the same small interface::
     obs, info = env.reset(seed=...)
     sup.reset(obs)
     action = sup.act(obs)  # each step
+    sup.phase  # optional: the phase of the plan the last action belongs to (an int)
 
 and :func:`collect_demos` runs the right one for a registered env id.
 """
@@ -69,8 +70,9 @@ def collect_demos(
     *,
     progress: bool = False,
     max_attempts: int | None = None,
+    return_phases: bool = False,
     **env_kwargs: Any,
-) -> list[Demonstration]:
+) -> list[Demonstration] | tuple[list[Demonstration], list[np.ndarray]]:
     """Run the env's supervisor for ``n`` successful episodes and return them as demos.
 
     Episode ``i`` is reset with a seed drawn from ``np.random.SeedSequence(seed).spawn``,
@@ -91,6 +93,10 @@ def collect_demos(
         Episodes to try at most. By default every episode must succeed (a supervisor is
         expected to be reliable, and silently dropping failures would bias the demos towards
         easy starts); with ``max_attempts > n``, failed episodes are skipped until ``n`` succeed.
+    return_phases : bool, default False
+        Also return, per demo, the supervisor's phase at every action (an int array of shape
+        (T,)): the ground truth of a segmentation, for supervisors that plan in phases (the
+        parking supervisor: forward, reverse in, reverse out, final).
     **env_kwargs
         Passed to ``gym.make`` (e.g. ``link_length_2=1.5``).
 
@@ -98,12 +104,13 @@ def collect_demos(
     -------
     list of Demonstration
         ``observations`` (T + 1, d) float64, ``actions`` (T,) int64, ``rewards`` (T,) float64.
+        With ``return_phases``, a tuple of that list and the list of phase arrays.
 
     Raises
     ------
     ValueError
-        Unknown ``env_id``, or ``n`` / ``max_attempts`` not positive integers with
-        ``max_attempts >= n``.
+        Unknown ``env_id``, ``n`` / ``max_attempts`` not positive integers with
+        ``max_attempts >= n``, or ``return_phases`` for a supervisor without phases.
     RuntimeError
         If fewer than ``n`` episodes succeed within ``max_attempts``; names the failed seeds.
 
@@ -119,21 +126,25 @@ def collect_demos(
     if seed is not None:
         seed = check_int("seed", seed, low=0)
     children = np.random.SeedSequence(seed).spawn(int(attempts))
+    if return_phases and not isinstance(getattr(supervisor_cls, "phase", None), property):
+        raise ValueError(f"{supervisor_cls.__name__} does not plan in phases (no .phase)")
 
     env = gym.make(env_id, **env_kwargs)
     demos: list[Demonstration] = []
+    phases: list[np.ndarray] = []
     failed: list[int] = []
     try:
         with _progress_bar(progress, f"{env_id} demos", n) as advance:
             for child in children:
                 env_seed, supervisor_seed = (int(x) for x in child.generate_state(2))
-                demo = _run_episode(env, supervisor_cls, env_seed, supervisor_seed)
+                demo, phase = _run_episode(env, supervisor_cls, env_seed, supervisor_seed)
                 if demo is None:
                     failed.append(env_seed)
                     if max_attempts is None:
                         break
                     continue
                 demos.append(demo)
+                phases.append(phase)
                 advance()
                 if len(demos) == n:
                     break
@@ -149,21 +160,23 @@ def collect_demos(
                 else f"all {attempts} attempts are spent; raise max_attempts"
             )
         )
-    return demos
+    return (demos, phases) if return_phases else demos
 
 
 def _run_episode(
     env: gym.Env, supervisor_cls: type[Supervisor], env_seed: int, supervisor_seed: int
-) -> Demonstration | None:
-    """One supervised episode; ``None`` unless it ends in success."""
+) -> tuple[Demonstration | None, np.ndarray]:
+    """One supervised episode and its phases (-1 without); ``None`` unless it succeeds."""
     supervisor = supervisor_cls(env.unwrapped, seed=supervisor_seed)
     obs, _ = env.reset(seed=env_seed)
     supervisor.reset(obs)
     observations = [obs]
     actions: list[int] = []
     rewards: list[float] = []
+    phases: list[int] = []
     while True:
         action = supervisor.act(obs)
+        phases.append(int(getattr(supervisor, "phase", -1)))
         obs, reward, terminated, truncated, info = env.step(action)
         observations.append(obs)
         actions.append(action)
@@ -171,12 +184,13 @@ def _run_episode(
         if terminated or truncated:
             break
     if not info.get("is_success", False):
-        return None
-    return Demonstration(
+        return None, np.asarray(phases)
+    demo = Demonstration(
         observations=np.asarray(observations, dtype=np.float64),
         actions=np.asarray(actions, dtype=np.int64),
         rewards=np.asarray(rewards, dtype=np.float64),
     )
+    return demo, np.asarray(phases, dtype=np.int64)
 
 
 @contextmanager

@@ -180,6 +180,11 @@ class ParkingSupervisor:
         self._t += 1
         return action
 
+    @property
+    def phase(self) -> int:
+        """Phase of the last action: 0 forward, 1 reverse in, 2 reverse out, 3 final."""
+        return self._phase
+
     # ------------------------------------------------------------------ planning
     def _check_obs(self, obs: Any) -> None:
         if obs is None:
