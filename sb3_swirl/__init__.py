@@ -9,6 +9,7 @@ Importing the package registers the ``sb3_swirl/`` gymnasium environments.
 
 from sb3_swirl import envs  # noqa: F401  (registers the sb3_swirl/ gymnasium envs)
 from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
+from sb3_swirl.datasets import make_switching_demos
 from sb3_swirl.demos import (
     Demonstration,
     DemoWarning,
@@ -24,9 +25,14 @@ from sb3_swirl.envs import NoisyAcrobotEnv, ParallelParkingEnv
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.fitting import fit_task
 from sb3_swirl.inverse_dynamics import InverseDynamics
-from sb3_swirl.plotting import plot_rewards, plot_segments
+from sb3_swirl.plotting import plot_rewards, plot_segments, plot_transitions
 from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
-from sb3_swirl.segmentation import SegmentationWarning, TransitionStateClustering
+from sb3_swirl.segmentation import (
+    SegmentationWarning,
+    TransitionStateClustering,
+    ruptures_indicator,
+    switch_scores,
+)
 from sb3_swirl.supervisors import collect_demos
 from sb3_swirl.vec_env import SwirlVecEnv, get_swirl_attr, make_swirl_env
 from swirl_wrappers import RewardConfig, SwirlVectorWrapper, SwirlWrapper, TaskModel
@@ -57,9 +63,13 @@ __all__ = [
     "get_swirl_attr",
     "load_demos",
     "make_swirl_env",
+    "make_switching_demos",
     "plot_rewards",
     "plot_segments",
+    "plot_transitions",
+    "ruptures_indicator",
     "save_demos",
+    "switch_scores",
     "to_imitation",
     "to_minari",
 ]

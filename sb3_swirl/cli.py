@@ -145,7 +145,9 @@ def _cmd_show(args: argparse.Namespace) -> int:
     from swirl_wrappers import TaskModel
 
     if args.demos is not None and args.plot is None:
-        raise ValueError("--demos are drawn in DIR/segments.png: give --plot DIR too")
+        raise ValueError(
+            "--demos are drawn in DIR/segments.png and transitions.png: give --plot DIR too"
+        )
     if args.plot is not None:
         _writable_folder(Path(args.plot))
     task = TaskModel.from_json(args.task)
@@ -156,7 +158,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
         demos = load_demos(args.demos)
     _print_task(task)
     if args.plot is not None:
-        from sb3_swirl.plotting import plot_rewards, plot_segments
+        from sb3_swirl.plotting import plot_rewards, plot_segments, plot_transitions
 
         out = Path(args.plot)
         out.mkdir(parents=True, exist_ok=True)
@@ -164,7 +166,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
         written = [out / "rewards.png"]
         if demos is not None:
             plot_segments(demos, task, path=out / "segments.png")
-            written.append(out / "segments.png")
+            plot_transitions(demos, task, path=out / "transitions.png")
+            written += [out / "segments.png", out / "transitions.png"]
         console.print("wrote " + ", ".join(str(p) for p in written))
     return 0
 
@@ -203,7 +206,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("demos", help=".npz file of demonstrations (see `sb3-swirl demos`)")
     p.add_argument("-o", "--output", required=True, help="output task JSON")
     p.add_argument("--seed", type=_seed, default=0)
-    p.add_argument("--indicator", default="gmm", choices=["gmm", "velocity", "linear"])
+    p.add_argument(
+        "--indicator",
+        default="gmm",
+        help="gmm (default), velocity, linear, ruptures (needs the ruptures package), or "
+        "several joined by '+'",
+    )
     p.add_argument("--window", type=int, default=None, help="window length of the indicator")
     p.add_argument("--min-demo-fraction", type=float, default=None)
     p.add_argument(
@@ -228,7 +236,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("show", help="print a fitted task; optionally plot it")
     p.add_argument("task", help="task JSON written by `sb3-swirl fit`")
     p.add_argument(
-        "--plot", metavar="DIR", default=None, help="write rewards.png (and segments.png)"
+        "--plot",
+        metavar="DIR",
+        default=None,
+        help="write rewards.png (with --demos also segments.png, transitions.png)",
     )
     p.add_argument("--demos", default=None, help="demos .npz to draw in segments.png")
     p.set_defaults(func=_cmd_show)

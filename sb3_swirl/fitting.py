@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import functools
 import inspect
-import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -13,7 +12,7 @@ from sklearn.base import clone
 
 from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
-from sb3_swirl.segmentation import SegmentationWarning, TransitionStateClustering
+from sb3_swirl.segmentation import TransitionStateClustering
 from swirl_wrappers import TaskModel
 from swirl_wrappers.task import angle_features, check_angles
 
@@ -193,24 +192,6 @@ def fit_task(
 
     report(f"learning transition regions from {len(demos)} demonstrations")
     segmenter.fit(demos)
-    # Candidate regions that most demos share but a few do not: the few are worth a look (a
-    # demo at another rate, one that skipped a phase). Where many demos disagree, the drops
-    # are the demonstrators' variety, recorded in the metadata only.
-    few = max(1, len(demos) // 4)
-    lost = sorted(
-        (d for d in segmenter.dropped_regions_ if 0 < len(d["demos"]) <= few),
-        key=lambda d: d["time"],
-    )
-    if lost:
-        message = (
-            f"dropped {len(lost)} candidate region(s) that all but a few demos share: "
-            + "; ".join(f"near step {d['time']:.0f}, {d['reason']}" for d in lost)
-            + f". The task has {len(segmenter.regions_)} segment(s); if those demos differ "
-            "from the others (another rate, a skipped phase), fix or drop them, or lower "
-            "min_demo_fraction"
-        )
-        report(message)
-        warnings.warn(message, SegmentationWarning, stacklevel=2)
     report(f"learning local rewards for {len(segmenter.regions_)} segments")
     learner.fit(demos, segmenter)
     lengths = [len(d) for d in demos]
@@ -224,6 +205,7 @@ def fit_task(
         "random_state": _jsonable(random_state),
         "segmentation": _record(segmenter),
         "dropped_regions": segmenter.dropped_regions_,
+        "transitions": [t.tolist() for t in segmenter.transitions_],
         "reward": _record(learner),
     }
     task = TaskModel(

@@ -1,6 +1,6 @@
-"""Plots of a learned proxy task: segmented demonstrations (the paper's Fig. 13) and reward
-matrices (Fig. 14). Matplotlib only, safe under the Agg backend; every function returns the
-Figure and saves it when given ``path``.
+"""Plots of a learned proxy task: segmented demonstrations (the paper's Fig. 13), reward
+matrices (Fig. 14) and the transitions found along each demonstration. Matplotlib only, safe
+under the Agg backend; every function returns the Figure and saves it when given ``path``.
 """
 
 from __future__ import annotations
@@ -147,6 +147,100 @@ def plot_segments(
     ax.autoscale_view()
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend(loc="best", fontsize="small", ncols=2)
+    return _finish(fig, path)
+
+
+def plot_transitions(
+    demos: Any,
+    task: TaskModel,
+    *,
+    max_demos: int = 8,
+    path: str | os.PathLike | None = None,
+) -> Figure:
+    """Each demonstration's motion over time, with the candidate and the final transitions.
+
+    One panel per demonstration (the first ``max_demos``): the speed in task space (each axis
+    divided by its spread over all demonstrations) and the change of direction of motion
+    (the angle between the mean velocities over the 3 steps before and after each step, the
+    velocity indicator's signal), with the candidate transitions the fit's indicator proposed
+    (``task.metadata["transitions"]``, when the task was fitted on these demonstrations) as
+    dots and the steps at which the task's segmentation enters each region as vertical lines.
+    Candidates far from every line were dropped by the clustering or the pruning
+    (``task.metadata["dropped_regions"]`` says why).
+
+    Parameters
+    ----------
+    demos : anything :func:`sb3_swirl.demos.as_demonstrations` accepts (full observations)
+    task : TaskModel
+    max_demos : int
+    path : str or path-like, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    _check_task(task)
+    demos = as_demonstrations(demos)
+    shown = demos[: max(1, int(max_demos))]
+    states = [task.featurize(d.observations) for d in demos]
+    spread = np.concatenate(states).std(axis=0)
+    spread[spread == 0] = 1.0
+    candidates = task.metadata.get("transitions")
+    lengths = task.metadata.get("demo_lengths", {})
+    if candidates is not None and (
+        len(candidates) != len(demos)
+        or lengths.get("min") != min(len(d) for d in demos)
+        or lengths.get("max") != max(len(d) for d in demos)
+    ):
+        candidates = None  # fitted on other demonstrations
+    colors = _colors(task.n_segments)
+    fig = _new_figure((8.0, 1.6 * len(shown) + 0.8))
+    axes = fig.subplots(len(shown), 1, sharex=False, squeeze=False)[:, 0]
+    w = 3
+    for k, (ax, x) in enumerate(zip(axes, states, strict=False)):
+        z = x / spread
+        speed = np.linalg.norm(np.diff(z, axis=0), axis=1)
+        ax.plot(np.arange(1, len(z)), speed, color="tab:gray", lw=1.0, label="speed")
+        twin = ax.twinx()
+        if len(z) > 2 * w:
+            before, after = z[w:-w] - z[: -2 * w], z[2 * w :] - z[w:-w]
+            norm = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
+            cos = np.einsum("ij,ij->i", before, after) / np.where(norm > 0, norm, 1.0)
+            angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+            twin.plot(np.arange(w, len(z) - w), angle, color="tab:blue", lw=1.0)
+        twin.set_ylim(0, 180)
+        twin.set_ylabel("turn (°)", color="tab:blue", fontsize="small")
+        if candidates is not None and candidates[k]:
+            steps = np.asarray(candidates[k], dtype=int)
+            ax.plot(
+                steps,
+                speed[np.clip(steps - 1, 0, len(speed) - 1)],
+                "o",
+                color="tab:red",
+                ms=4,
+                label="candidate",
+            )
+        index = task.segment_indices(demos[k].observations)
+        for i in range(1, task.n_indices):
+            entered = np.flatnonzero(index >= i)
+            if entered.size and entered[0] > 0:
+                ax.axvline(
+                    entered[0], color=colors[i - 1], lw=2, alpha=0.8, label=f"enters region {i - 1}"
+                )
+        ax.set_ylabel(f"demo {k}\nspeed", fontsize="small")
+        ax.set_xlim(0, len(z) - 1)
+    axes[-1].set_xlabel("step")
+    handles, labels = [], []
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(handles, labels, loc="outside upper center", ncols=4, fontsize="small")
+    if candidates is None:
+        fig.suptitle(
+            "(candidates not shown: the task was fitted on other demonstrations)", fontsize="small"
+        )
     return _finish(fig, path)
 
 

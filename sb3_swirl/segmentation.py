@@ -17,6 +17,7 @@ Three indicators are provided (§9.5 of the paper compares them) and any callabl
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from numbers import Integral, Real
 from typing import Any, ClassVar
@@ -33,6 +34,7 @@ from threadpoolctl import threadpool_limits
 
 from sb3_swirl.demos import as_demonstrations, check_demos_agree, check_window
 from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
+from swirl_wrappers._validation import check_option
 
 Indicator = Callable[[list[np.ndarray], Any], list[np.ndarray]]
 
@@ -62,6 +64,43 @@ def _interior(idx: np.ndarray, n_states: int) -> np.ndarray:
     """Sorted unique indices without the first and last state (they never count as transitions)."""
     idx = np.unique(np.asarray(idx, dtype=np.int64))
     return idx[(idx > 0) & (idx < n_states - 1)]
+
+
+def _merge_close(idx: np.ndarray, radius: int) -> np.ndarray:
+    """Sorted unique steps, each within ``radius`` of the previous kept one dropped."""
+    keep: list[int] = []
+    for j in np.unique(idx.astype(np.int64)):
+        if not keep or j - keep[-1] > radius:
+            keep.append(int(j))
+    return np.asarray(keep, dtype=np.int64)
+
+
+def _time_scales(states: list[np.ndarray]) -> np.ndarray:
+    """Each demonstration's typical step over the median of all demonstrations' (1 if 0).
+
+    The typical step is the median of ``||s_{t+1} - s_t||``, each dimension divided by its
+    standard deviation over all states.
+    """
+    scale = _scale(np.concatenate(states))
+    typical = np.array(
+        [np.median(np.linalg.norm(np.diff(x / scale, axis=0), axis=1)) for x in states]
+    )
+    reference = float(np.median(typical))
+    if not reference > 0:
+        return np.ones(len(states))
+    return np.where(typical > 0, typical / reference, 1.0)
+
+
+def _resample(x: np.ndarray, factor: float, min_states: int) -> tuple[np.ndarray, float]:
+    """``x`` resampled to about ``factor`` times as many steps; also old steps per new step."""
+    n_steps = len(x) - 1
+    new_steps = max(min_states - 1, round(n_steps * factor))
+    if new_steps == n_steps:
+        return x, 1.0
+    t = np.linspace(0.0, n_steps, new_steps + 1)
+    grid = np.arange(len(x))
+    resampled = np.column_stack([np.interp(t, grid, x[:, j]) for j in range(x.shape[1])])
+    return resampled, n_steps / new_steps
 
 
 def _windows(x: np.ndarray, window: int) -> np.ndarray:
@@ -304,7 +343,78 @@ def linear_indicator(
     return out
 
 
-_INDICATORS = {"gmm", "velocity", "linear"}
+def _noise_scale(velocities: list[np.ndarray]) -> np.ndarray:
+    """Per-dimension noise of step velocities, from the spread of their changes.
+
+    Where velocity is piecewise smooth, a change of velocity between steps is mostly noise:
+    its median absolute value over all demonstrations, over ``0.6745 sqrt 2``, estimates the
+    noise of one velocity (robust to the few steps where the motion really changes).
+    """
+    changes = np.concatenate([np.abs(np.diff(v, axis=0)) for v in velocities if len(v) > 1])
+    sd = np.median(changes, axis=0) / (0.6745 * math.sqrt(2.0))
+    floor = 1e-6 * max(float(np.concatenate(velocities).std()), 1e-300)
+    return np.maximum(sd, floor)
+
+
+def ruptures_indicator(
+    states: list[np.ndarray],
+    random_state: Any = None,
+    *,
+    method: str = "pelt",
+    penalty: float | None = None,
+    min_size: int = 3,
+) -> list[np.ndarray]:
+    """Candidate transitions from the ``ruptures`` change-point library, per demonstration.
+
+    Step velocities ``s_{t+1} - s_t`` are standardised by their noise (pooled over all
+    demonstrations, see ``_noise_scale``) and each demonstration is cut by ``ruptures``:
+    ``"pelt"`` and ``"binseg"`` with the l2 cost (a change of mean velocity),
+    ``"kernel"`` with ``KernelCPD`` and the RBF kernel (any change of the velocity
+    distribution). A change between velocities ``t - 1`` and ``t`` is reported at step ``t``.
+    Needs the optional ``ruptures`` package (``pip install ruptures``).
+
+    Parameters
+    ----------
+    states : list of arrays of shape (T_i + 1, p)
+    random_state : ignored (the indicator is deterministic)
+    method : {"pelt", "binseg", "kernel"}
+    penalty : float, optional
+        Penalty per change point; default ``2 p log T`` for the l2 cost (BIC-like in units of
+        the noise) and ``log T`` for the kernel cost (bounded by one per step).
+    min_size : int
+        Fewest steps between change points.
+    """
+    del random_state
+    try:
+        import ruptures as rpt
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "the ruptures indicator needs the ruptures package: pip install ruptures"
+        ) from exc
+    method = check_option("method", method, ("pelt", "binseg", "kernel"))
+    velocities = [np.diff(x, axis=0) for x in states]
+    scale = _noise_scale(velocities)
+    out = []
+    for x, v in zip(states, velocities, strict=True):
+        signal = v / scale
+        n, p = signal.shape
+        if n < 2 * min_size:
+            out.append(np.zeros(0, dtype=np.int64))
+            continue
+        if method == "kernel":
+            pen = math.log(n) if penalty is None else penalty
+            algo = rpt.KernelCPD(kernel="rbf", min_size=min_size)
+        else:
+            pen = 2 * p * math.log(n) if penalty is None else penalty
+            cls = rpt.Pelt if method == "pelt" else rpt.Binseg
+            algo = cls(model="l2", min_size=min_size, jump=1)
+        bkps = algo.fit(signal).predict(pen=pen)[:-1]
+        out.append(_interior(np.asarray(bkps, dtype=np.int64), len(x)))
+    return out
+
+
+_INDICATORS = ("gmm", "velocity", "linear", "ruptures")
+_BUILTIN = (gmm_indicator, velocity_indicator, linear_indicator, ruptures_indicator)
 
 
 # ---------------------------------------------------------------------------- regions
@@ -412,6 +522,73 @@ def _overlaps(a: Region, b: Region) -> bool:
     return bool(a.contains(b.mean) or b.contains(a.mean))
 
 
+def switch_scores(
+    found: Sequence[np.ndarray],
+    true: Sequence[np.ndarray],
+    lengths: Sequence[int],
+    *,
+    tolerance: float = 0.03,
+    min_tolerance: int = 3,
+) -> dict[str, float]:
+    """Precision, recall and F1 of found switch points against known ones.
+
+    In demonstration ``i`` a found switch is a hit when a true switch lies within
+    ``max(min_tolerance, ceil(tolerance * lengths[i]))`` steps; each true switch is matched at
+    most once (closest pairs first). Hits are pooled over the demonstrations.
+
+    Parameters
+    ----------
+    found, true : sequences of int arrays, one per demonstration
+        E.g. ``TransitionStateClustering.switches_`` and annotated phase changes.
+    lengths : sequence of int
+        Steps per demonstration.
+    tolerance : float
+        Fraction of a demonstration's length.
+    min_tolerance : int
+        Steps, at least.
+
+    Returns
+    -------
+    dict
+        ``precision``, ``recall``, ``f1``, ``hits``, ``found``, ``true``.
+
+    Examples
+    --------
+    >>> switch_scores([np.array([10, 52])], [np.array([11, 30])], [100])["f1"]
+    0.5
+    """
+    hits = n_found = n_true = 0
+    for f, t, n in zip(found, true, lengths, strict=True):
+        f, t = np.asarray(f, dtype=np.int64), np.asarray(t, dtype=np.int64)
+        tol = max(min_tolerance, math.ceil(tolerance * n))
+        pairs = sorted(
+            (abs(int(a) - int(b)), i, j)
+            for i, a in enumerate(f)
+            for j, b in enumerate(t)
+            if abs(int(a) - int(b)) <= tol
+        )
+        used_f: set[int] = set()
+        used_t: set[int] = set()
+        for _, i, j in pairs:
+            if i not in used_f and j not in used_t:
+                used_f.add(i)
+                used_t.add(j)
+        hits += len(used_f)
+        n_found += len(f)
+        n_true += len(t)
+    precision = hits / n_found if n_found else float(n_true == 0)
+    recall = hits / n_true if n_true else 1.0
+    f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
+    return {
+        "precision": precision,
+        "recall": recall,
+        "f1": f1,
+        "hits": hits,
+        "found": n_found,
+        "true": n_true,
+    }
+
+
 class SegmentationWarning(UserWarning):
     """The segmentation dropped candidate regions that some demos share (see the message)."""
 
@@ -458,7 +635,8 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
        demonstration is kept (the most probable member), which discards stray indicator
        noise merged into the cluster.
     5. Each survivor becomes a :class:`swirl_wrappers.Region`: the mean and regularised
-       covariance of its representative states and the chi-square quantile of ``confidence``.
+       covariance of its representative states and the chi-square quantile of ``confidence``
+       (raised where needed so that the region holds every state it was built from).
        With ``include_goal`` a final *goal* region is added from the demonstrations' final
        states: the last state is never a transition, yet the last segment needs a target.
        Regions are ordered by median transition time (the goal last). A transition region
@@ -515,21 +693,41 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
     covariance_type : {"diag", "tied", "spherical", "full"}, default "diag"
         Covariance of the DP-GMM components; with few transition points per cluster full
         covariances over-split.
-    reg_covar : float, default 1e-3
+    reg_covar : float, default 1e-4
         Added to each region covariance, relative to the variance of all demonstration states
-        along each axis; keeps regions built from few or identical points well posed. With
-        very few demos a region rests on one point per demo, which can agree along an axis
-        far more than new episodes will: raise it (e.g. to 0.1) so that new start states
+        along each axis; keeps regions built from few or identical points well posed. It sets
+        how early a demonstration that slows down towards a transition enters its region:
+        the default is the one ``benchmarks/bench_segmentation.py`` chose (a larger floor
+        makes regions of slow approaches too wide). With very few demos a region
+        rests on one point per demo, which can agree along an axis far more than new episodes
+        will: for reinforcement learning raise it (e.g. to 0.1) so that new start states
         still enter the regions.
     use_time : bool, default False
         Give each region a time window (the range of its transition times, widened on each
         side by that range or ``window`` steps, whichever is larger). Off by default: an RL
         agent early in training is much slower than the demonstrator and would miss regions
         that expire.
+    normalize_time : bool, default True
+        Resample every demonstration (linear interpolation) so that its typical step, the
+        median of ``||s_{t+1} - s_t||`` over its steps (each dimension divided by its spread
+        over all states), equals the median over all demonstrations, before a built-in
+        indicator runs and transitions are clustered in time (a callable indicator gets the
+        demonstrations as given). Demonstrations recorded at other sampling
+        rates, or by slower demonstrators, then look alike to the windowed indicators.
+        Candidate steps are mapped back to each demonstration's own steps; the regions, and
+        the segmentation an agent gets, depend on states only.
     include_goal : bool, default True
         Add the goal region built from the demonstrations' final states.
     random_state : int, RandomState or None
         Seeds every random choice (landmarks, PCA, indicator GMM, DP-GMM).
+
+    Warns
+    -----
+    SegmentationWarning
+        When no transition region survived (one segment to the goal: the message says
+        whether the indicator found no candidates or which step dropped them), or when
+        candidate regions that all but a few demos share were dropped; the message names the
+        demos, the reason and the threshold.
 
     Attributes
     ----------
@@ -540,6 +738,10 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
     segments_ : list of int arrays of shape (n_regions,)
         Per demonstration, the step at which each region is reached under the Markov
         segmentation function (``-1`` when not reached).
+    switches_ : list of int arrays
+        Per demonstration, the steps at which it enters a new segment (entering the goal
+        region is the end, not a switch): compare them with known phase changes using
+        :func:`switch_scores`.
     region_transitions_ : list of list of (demo, step)
         The representative transitions each transition region was built from (empty for the
         goal region).
@@ -549,6 +751,9 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         transition there, or that do not reach it in order).
     feature_map_ : RBFFeatures or None
         The kernel feature map when ``kernel="rbf"``.
+    time_scale_ : array of shape (n_demos,)
+        Each demonstration's resampling factor (its typical step over the median; all ones
+        without ``normalize_time`` or with a callable indicator).
     n_demos_ : int
     state_dim_ : int
         Dimension of the states given to ``fit``.
@@ -563,7 +768,7 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
     """
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
-        "indicator": [StrOptions(_INDICATORS), callable],
+        "indicator": [str, callable],
         "window": [_COUNT, None],
         "n_indicator_components": [_COUNT],
         "max_indicator_samples": [_COUNT],
@@ -578,6 +783,7 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         "covariance_type": [StrOptions({"diag", "tied", "spherical", "full"})],
         "reg_covar": [_POSITIVE],
         "use_time": ["boolean"],
+        "normalize_time": ["boolean"],
         "include_goal": ["boolean"],
         "random_state": ["random_state"],
     }
@@ -597,8 +803,9 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         min_demo_fraction: float = 1.0,
         confidence: float = 0.95,
         covariance_type: str = "diag",
-        reg_covar: float = 1e-3,
+        reg_covar: float = 1e-4,
         use_time: bool = False,
+        normalize_time: bool = True,
         include_goal: bool = True,
         random_state: int | np.random.RandomState | None = None,
     ) -> None:
@@ -617,6 +824,7 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         self.covariance_type = covariance_type
         self.reg_covar = reg_covar
         self.use_time = use_time
+        self.normalize_time = normalize_time
         self.include_goal = include_goal
         self.random_state = random_state
 
@@ -643,6 +851,14 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
             return self._fit(demos)
 
     def _fit(self, demos: list) -> TransitionStateClustering:
+        if isinstance(self.indicator, str):
+            unknown = [n for n in self.indicator.split("+") if n not in _INDICATORS]
+            if unknown:
+                raise InvalidParameterError(
+                    f"The 'indicator' parameter of {type(self).__name__} must be one of "
+                    f"{list(_INDICATORS)}, several of them joined by '+' (e.g. "
+                    f"'gmm+velocity'), or a callable. Got {self.indicator!r} instead."
+                )
         rs = check_random_state(self.random_state)
         seeds = rs.randint(_SEED_MAX, size=3)
         states = [d.observations for d in demos]
@@ -652,7 +868,29 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
             self._fit_feature_map(states, seeds[0]) if self.kernel == "rbf" else None
         )
         x = states if self.feature_map_ is None else [self.feature_map_(s) for s in states]
-        self.transitions_ = self._indicate(x, int(seeds[1]))
+        # a callable indicator is the user's own method: it gets the demos as they are
+        normalize = self.normalize_time and (
+            isinstance(self.indicator, str) or getattr(self.indicator, "func", None) in _BUILTIN
+        )
+        self.time_scale_ = _time_scales(x) if normalize else np.ones(len(x))
+        resampled = [
+            _resample(s, r, self._window + 2) for s, r in zip(x, self.time_scale_, strict=True)
+        ]
+        try:
+            found = self._indicate([s for s, _ in resampled], int(seeds[1]))
+        except ValueError as exc:
+            if np.all(self.time_scale_ == 1.0):
+                raise
+            raise ValueError(
+                f"{exc} (in the demos resampled to a common rate by normalize_time=True, "
+                f"{[len(s) for s, _ in resampled]} states; as given "
+                f"{[len(s) for s in x]}: pass normalize_time=False to run the indicator on "
+                "the demos as given)"
+            ) from exc
+        self.transitions_ = [
+            _interior(np.rint(idx * step).astype(np.int64), len(s))
+            for idx, (_, step), s in zip(found, resampled, x, strict=True)
+        ]
 
         pooled = np.concatenate(x)
         reg = self.reg_covar * np.diag(_scale(pooled) ** 2)
@@ -693,7 +931,61 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         task = _regions_task(self.regions_)
         self.segments_ = [_reach_steps(task, s) for s in x]
         self._check_complete(self.segments_)
+        ends = slice(None, -1) if self.include_goal else slice(None)
+        self.switches_ = [b[ends][b[ends] > 0] for b in self.segments_]
+        self._warn_lost()
         return self
+
+    def _warn_lost(self) -> None:
+        """Warn when the fit found candidates but kept almost none of their structure."""
+        n = self.n_demos_
+        n_candidates = sum(len(t) for t in self.transitions_)
+        n_transition_regions = len(self.regions_) - (1 if self.include_goal else 0)
+        advice = (
+            "try another indicator (indicator='velocity', 'linear', or 'ruptures' with the "
+            "ruptures package), a longer window, or a lower min_demo_fraction, and look at "
+            "`sb3-swirl show --plot` with the demos"
+        )
+        # Candidate regions that all but a few demos share: the few are worth a look (a demo
+        # at another rate, one that skipped a phase). Where many demos disagree, the drops are
+        # the demonstrators' variety, recorded in dropped_regions_ only.
+        few = max(1, n // 4)
+        lost = sorted(
+            (d for d in self.dropped_regions_ if 0 < len(d["demos"]) <= few),
+            key=lambda d: d["time"],
+        )
+        threshold = (
+            f"min_demo_fraction={self.min_demo_fraction} needs {self._min_demos(n)} of {n} demos"
+        )
+        parts = []
+        if n_transition_regions == 0 and not n_candidates:
+            parts.append(
+                "no transition region: the indicator found no candidate transition in any "
+                "demo (the motion shows no change it detects), so the task has one segment "
+                "to the goal"
+            )
+        elif n_transition_regions == 0:
+            reasons = sorted({d["reason"].split(" (")[0] for d in self.dropped_regions_})
+            parts.append(
+                f"no transition region: the indicator proposed {n_candidates} candidate "
+                f"transitions in {sum(len(t) > 0 for t in self.transitions_)} of {n} demos, "
+                f"and all {len(self.dropped_regions_)} candidate regions were dropped "
+                f"({'; '.join(reasons)}; {threshold}), so the task has one segment to the goal"
+            )
+        if lost:
+            parts.append(
+                f"dropped {len(lost)} candidate region(s) that all but a few demos share: "
+                + "; ".join(f"near step {d['time']:.0f}, {d['reason']}" for d in lost)
+                + f" ({threshold}); if those demos differ from the others (another rate, a "
+                "skipped phase), fix or drop them"
+            )
+        if not parts:
+            return
+        message = (
+            ". ".join(parts)
+            + f". The task has {len(self.regions_)} segment(s); to find more, {advice}"
+        )
+        warnings.warn(message, SegmentationWarning, stacklevel=3)
 
     def _check_complete(self, segments: list[np.ndarray]) -> None:
         """Raise unless enough demonstrations reach every region in order (after their start)."""
@@ -819,21 +1111,34 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
             offset=pca.mean_ @ pca.components_.T,
         )
 
-    def _indicate(self, x: list[np.ndarray], seed: int) -> list[np.ndarray]:
-        if self.indicator == "gmm":
-            found = gmm_indicator(
+    def _named_indicator(self, name: str, x: list[np.ndarray], seed: int) -> list[np.ndarray]:
+        if name == "gmm":
+            return gmm_indicator(
                 x,
                 seed,
                 window=self._window,
                 n_components=self.n_indicator_components,
                 max_samples=self.max_indicator_samples,
             )
-        elif self.indicator == "velocity":
-            found = velocity_indicator(x, seed, window=self._window)
-        elif self.indicator == "linear":
-            found = linear_indicator(x, seed, window=self.window)
-        else:
+        if name == "velocity":
+            return velocity_indicator(x, seed, window=self._window)
+        if name == "linear":
+            return linear_indicator(x, seed, window=self.window)
+        return ruptures_indicator(x, seed, min_size=self._window)
+
+    def _indicate(self, x: list[np.ndarray], seed: int) -> list[np.ndarray]:
+        if callable(self.indicator):
             found = self.indicator(x, seed)
+        else:
+            # several indicators: the union of their candidates, those closer than a window
+            # to an earlier one merged into it
+            names = self.indicator.split("+")
+            found = self._named_indicator(names[0], x, seed)
+            for name in names[1:]:
+                found = [
+                    _merge_close(np.concatenate([a, b]), self._window)
+                    for a, b in zip(found, self._named_indicator(name, x, seed), strict=True)
+                ]
         if not isinstance(found, Sequence) or len(found) != len(x):
             raise ValueError(
                 f"the transition indicator must return one index array per demonstration "
@@ -917,7 +1222,8 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
             groups = [(members, state_proba[members, c])]
             if len(members) > 1:
                 time_labels, time_proba = self._dpgmm_labels(
-                    steps[members, None].astype(np.float64), rs.randint(_SEED_MAX)
+                    (steps[members] * self.time_scale_[owner[members]])[:, None],
+                    rs.randint(_SEED_MAX),
                 )
                 sub = [
                     (members[time_labels == u], time_proba[time_labels == u, u])
@@ -950,4 +1256,10 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
         if self.use_time:
             spread = max(float(times.max() - times.min()), float(self._window))
             bounds = (max(0.0, float(times.min()) - spread), float(times.max()) + spread)
-        return Region(mean, cov + reg, threshold, time_bounds=bounds)
+        # A region holds the states it was built from: with few points the chi-square
+        # quantile can leave one of them outside (and that demo would then miss the region).
+        cov = cov + reg
+        diff = points - mean
+        d2 = np.einsum("ij,ij->i", diff, np.linalg.solve(cov, diff.T).T)
+        threshold = max(threshold, float(d2.max()) * (1 + 1e-9))
+        return Region(mean, cov, threshold, time_bounds=bounds)

@@ -242,5 +242,18 @@ def test_fit_reports_a_demo_at_another_rate_as_one_warning_line(tmp_path, capsys
     capsys.readouterr()
     assert main(["fit", str(path), "-o", str(tmp_path / "task.json"), "--reg-covar", "0.1"]) == 0
     warned = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning:")]
-    assert warned[0].startswith("warning: demo 4: its typical step is")
-    assert "none from demos [4]" in warned[1]
+    assert len(warned) == 1 and warned[0].startswith("warning: demo 4: its typical step is")
+
+
+def test_fit_prints_why_it_dropped_a_region(tmp_path, capsys):
+    from sb3_swirl.demos import make_piecewise_linear_demos, save_demos
+
+    demos, switches = make_piecewise_linear_demos(n_demos=6, random_state=0)
+    x = demos[5].observations.copy()
+    x[switches[5][0] :] = 2 * x[switches[5][0]] - x[switches[5][0] :]  # skips the 2nd corner
+    path = tmp_path / "demos.npz"
+    save_demos([*demos[:5], x], path)
+    assert main(["fit", str(path), "-o", str(tmp_path / "task.json")]) == 0
+    warned = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning:")]
+    assert len(warned) == 1 and "none from demos [5]" in warned[0]
+    assert "min_demo_fraction=1.0 needs 6 of 6 demos" in warned[0]

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from sb3_swirl import collect_demos, fit_task
+from sb3_swirl import collect_demos, fit_task, make_switching_demos
 from sb3_swirl.demos import (
     DemoWarning,
     as_demonstrations,
@@ -78,20 +78,52 @@ def test_an_absurd_value_is_an_error_naming_demo_step_and_dimension(parking_stat
         fit_task(corrupted, reg_covar=0.1, random_state=0)
 
 
+def test_a_demo_at_another_rate_keeps_the_segments_with_time_normalised(parking_states):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        clean = fit_task(parking_states, reg_covar=0.1, random_state=0).n_segments
+    assert clean == 4
+    same = 0
+    for k in (0, 2, 4):  # one demo 7x coarser
+        coarse = [*parking_states[:k], parking_states[k][::7], *parking_states[k + 1 :]]
+        with pytest.warns(DemoWarning, match=f"demo {k}"):
+            n = fit_task(coarse, reg_covar=0.1, random_state=0).n_segments
+        assert n >= clean - 1
+        same += n == clean
+    assert same >= 2
+
+
 def test_the_fit_says_which_regions_it_dropped_and_which_demos_lack_them(parking_states):
     coarse = [*parking_states[:4], parking_states[4][::7]]
     with (
         pytest.warns(DemoWarning, match="demo 4"),
         pytest.warns(SegmentationWarning, match=r"dropped 3 .*none from demos \[4\]") as record,
     ):
-        task = fit_task(coarse, reg_covar=0.1, random_state=0)
+        # step by step, the coarse demo hides every transition the others share
+        task = fit_task(coarse, reg_covar=0.1, normalize_time=False, random_state=0)
     message = next(str(w.message) for w in record if w.category is SegmentationWarning)
+    assert message.startswith("no transition region: the indicator proposed")
     assert "The task has 1 segment" in message and task.n_segments == 1
+    assert "min_demo_fraction=1.0 needs 5 of 5 demos" in message
     dropped = task.metadata["dropped_regions"]
     assert len(dropped) == 3 and all(d["demos"] == [4] for d in dropped)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        assert fit_task(parking_states, reg_covar=0.1, random_state=0).n_segments == 4
+
+
+def test_a_fit_without_candidates_says_so():
+    line = np.linspace(0.0, 10.0, 60)[:, None] * np.array([[1.0, 0.5]])
+    rng = np.random.default_rng(0)
+    demos = [line + rng.normal(scale=0.01, size=line.shape) for _ in range(4)]
+    with pytest.warns(SegmentationWarning, match="found no candidate transition in any demo"):
+        task = fit_task(demos, indicator="velocity", random_state=0)
+    assert task.n_segments == 1
+
+
+def test_clean_demos_fit_without_segmentation_warnings():
+    for kind in ("constant_velocity", "linear_dynamics"):
+        demos, _ = make_switching_demos(kind, n_demos=6, dim=3, random_state=7)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", SegmentationWarning)
+            assert fit_task(demos, random_state=0).n_segments == 3
 
 
 def test_a_demo_that_skips_a_phase_is_named():

@@ -10,7 +10,7 @@ from matplotlib.patches import Ellipse
 
 from sb3_swirl.demos import make_piecewise_linear_demos
 from sb3_swirl.fitting import fit_task
-from sb3_swirl.plotting import plot_rewards, plot_segments
+from sb3_swirl.plotting import plot_rewards, plot_segments, plot_transitions
 
 
 @pytest.fixture(scope="module")
@@ -60,3 +60,23 @@ def test_plots_refuse_a_path_in_place_of_a_task(fitted):
         plot_rewards("task.json")
     with pytest.raises(ValueError, match="got str"):
         plot_segments(demos, "task.json")
+
+
+def test_plot_transitions_marks_candidates_and_region_entries(fitted, tmp_path):
+    demos, task = fitted
+    fig = plot_transitions(demos, task, max_demos=3, path=tmp_path / "transitions.png")
+    panels = [ax for ax in fig.axes if ax.get_ylabel().startswith("demo")]
+    assert len(panels) == 3
+    first = panels[0]
+    dots = [ln for ln in first.get_lines() if ln.get_marker() == "o"]
+    assert len(dots[0].get_xdata()) == len(task.metadata["transitions"][0])
+    entries = [ln for ln in first.get_lines() if ln.get_label().startswith("enters region")]
+    steps = task.segment_indices(demos[0].observations)
+    assert [ln.get_xdata()[0] for ln in entries] == [
+        int(np.argmax(steps >= i)) for i in range(1, task.n_indices)
+    ]
+    assert (tmp_path / "transitions.png").stat().st_size > 1000
+    # demos the task was not fitted on: no candidates, said in the title
+    other, _ = make_piecewise_linear_demos(n_demos=4, dim=3, noise=0.1, random_state=5)
+    fig = plot_transitions(other, task)
+    assert "fitted on other demonstrations" in fig.texts[0].get_text()

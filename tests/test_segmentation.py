@@ -14,6 +14,7 @@ from sb3_swirl.segmentation import (
     TransitionStateClustering,
     gmm_indicator,
     segment_boundaries,
+    switch_scores,
     velocity_indicator,
 )
 
@@ -120,10 +121,12 @@ def _dist_to_detour(point, apexes):
 def test_pruning_drops_a_transition_only_some_demos_make(indicator):
     demos, switches = make_piecewise_linear_demos(n_demos=10, noise=0.05, random_state=0)
     demos, apexes = _with_detour(demos, switches, 3, np.random.default_rng(0))
-    strict = TransitionStateClustering(indicator=indicator, random_state=0).fit(demos)
+    # The pruning on the demos as given: the inserted detour changes those demos' rate.
+    kw = {"indicator": indicator, "normalize_time": False, "random_state": 0}
+    strict = TransitionStateClustering(**kw).fit(demos)
     assert len(strict.regions_) == 3
     assert min(_dist_to_detour(r.mean, apexes) for r in strict.regions_) > 5
-    loose = TransitionStateClustering(indicator=indicator, min_demo_fraction=0.3, random_state=0)
+    loose = TransitionStateClustering(min_demo_fraction=0.3, **kw)
     loose.fit(demos)
     assert len(loose.regions_) > 3
     assert min(_dist_to_detour(r.mean, apexes) for r in loose.regions_) < 2
@@ -165,6 +168,11 @@ def test_partial_indicator_names_a_demo_shorter_than_its_window(three_phases, in
     demos = [*demos[:2], demos[2].observations[:10], *demos[3:]]  # 10 states: enough for 3
     long_window = functools.partial(indicator, window=20)
     with pytest.raises(ValueError, match="demo 2 is shorter than the window: it has 10 states"):
+        TransitionStateClustering(indicator=long_window, normalize_time=False, random_state=0).fit(
+            demos
+        )
+    # resampled to a common rate, the message says so and gives the lengths as given
+    with pytest.raises(ValueError, match=r"shorter than the window.*as given \[\d+, \d+, 10,"):
         TransitionStateClustering(indicator=long_window, random_state=0).fit(demos)
 
 
@@ -312,3 +320,13 @@ def test_non_finite_or_non_numeric_parameters_are_value_errors(three_phases, par
     name = next(iter(params))
     with pytest.raises(ValueError, match=name):
         TransitionStateClustering(kernel="rbf", **params).fit(demos)
+
+
+def test_ruptures_and_combined_indicators_recover_the_switch_points(three_phases):
+    demos, switches = three_phases
+    for indicator in ("ruptures", "gmm+velocity"):
+        tsc = TransitionStateClustering(indicator=indicator, random_state=0).fit(demos)
+        scores = switch_scores(tsc.switches_, switches, [len(d) for d in demos])
+        assert scores["f1"] >= 0.9, (indicator, scores)
+    with pytest.raises(ValueError, match=r"'indicator' parameter .* joined by '\+'"):
+        TransitionStateClustering(indicator="gmm+hmm").fit(demos)

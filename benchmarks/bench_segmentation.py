@@ -1,0 +1,195 @@
+"""Segmentation on demonstrations with known switch points: ours against ruptures.
+
+Generators (:func:`sb3_swirl.datasets.make_switching_demos`): four kinds of phase dynamics
+(constant velocity, goal reaching, linear dynamics, phases that differ in one dimension only),
+each in seven variants that change one thing from a base of 10 demos, 4-D, 3 phases of about
+40 samples, observation noise 0.1 (of a sample's motion), demonstrator speeds varying 1.5x:
+
+* ``base``; ``dims``: 12-20 dimensions; ``phases``: 5-6 phases; ``noisy``: noise 0.5;
+  ``nuisance``: 3 extra dimensions moving on their own; ``warped``: speeds varying 2x and time
+  warped inside each demo; ``rates``: every other demo sampled at half the rate.
+
+Plus **parking**: 5 supervisor demos, the supervisor's own phases (forward, reverse in,
+reverse out, final) as the truth.
+
+Metric: a switch found in a demo (the step at which the fitted segmentation enters a new
+segment; the goal region is not a switch) is a hit if a true switch of that demo lies within
+the tolerance, ``max(3, 3 % of the demo's length)`` steps, each true switch matched once.
+Precision, recall and F1 pool the hits over a set's demos. Also: segments found against true,
+and fit time (the segmentation alone).
+
+Generator seeds are split: seeds 0-4 (tuning) chose the defaults, seeds 100-104 (held out) are
+the result; ``--split tuning`` shows the former.
+
+Methods: ``default`` (our defaults: the GMM indicator, time normalised); ``previous`` (the
+defaults before this benchmark: region floor ``reg_covar=1e-3``, no time normalisation);
+``velocity``, ``linear`` (the other indicators of the paper's Fig. 6, other settings default);
+``rpt-*``: ruptures (Pelt and Binseg with the l2 cost on velocities, KernelCPD with the RBF
+kernel on velocities) run per demo, then the same cross-demo consensus (clustering, pruning)
+and settings as ours.
+
+Run: ``python benchmarks/bench_segmentation.py [--quick] [--split tuning|held-out]
+[--methods default gmm ...] [--json out.json]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import statistics
+import time
+import warnings
+from collections import defaultdict
+from typing import Any
+
+import numpy as np
+
+from sb3_swirl.datasets import KINDS, make_switching_demos
+from sb3_swirl.segmentation import (
+    SegmentationWarning,
+    TransitionStateClustering,
+    ruptures_indicator,
+    switch_scores,
+)
+
+SEEDS = {"tuning": [0, 1, 2, 3, 4], "held-out": [100, 101, 102, 103, 104]}
+VARIANTS = ("base", "dims", "phases", "noisy", "nuisance", "warped", "rates")
+METHODS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "previous": {"reg_covar": 1e-3, "normalize_time": False},  # the defaults before
+    "velocity": {"indicator": "velocity"},
+    "linear": {"indicator": "linear"},
+    "rpt-pelt": {"indicator": functools.partial(ruptures_indicator, method="pelt")},
+    "rpt-binseg": {"indicator": functools.partial(ruptures_indicator, method="binseg")},
+    "rpt-kernel": {"indicator": functools.partial(ruptures_indicator, method="kernel")},
+}
+
+
+def variant_kwargs(variant: str, rng: np.random.Generator) -> dict[str, Any]:
+    """Generator arguments of one variant (drawn with ``rng`` where it has a range)."""
+    base: dict[str, Any] = {"n_demos": 10, "dim": 4, "n_phases": 3, "noise": 0.1}
+    extra = {
+        "base": {},
+        "dims": {"dim": int(rng.integers(12, 21))},
+        "phases": {"n_phases": int(rng.integers(5, 7))},
+        "noisy": {"noise": 0.5},
+        "nuisance": {"nuisance_dims": 3},
+        "warped": {"speed_ratio": 2.0, "time_warp": 0.4},
+        "rates": {"rates": (1, 2)},
+    }[variant]
+    return {**base, **extra}
+
+
+def score(
+    demos: list, switches: list[np.ndarray], params: dict[str, Any], seed: int
+) -> dict[str, Any]:
+    """Fit the segmentation and score it against the true switches."""
+    start = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SegmentationWarning)
+        try:
+            tsc = TransitionStateClustering(random_state=seed, **params).fit(demos)
+            found, n_segments = tsc.switches_, len(tsc.regions_)
+            error = None
+        except ValueError as exc:  # no region shared: nothing found
+            found, n_segments, error = [np.zeros(0, np.int64)] * len(demos), 0, str(exc)
+    seconds = time.perf_counter() - start
+    scores = switch_scores(found, switches, [len(d) for d in demos])
+    warned = any(issubclass(w.category, SegmentationWarning) for w in caught) or bool(error)
+    return {
+        "f1": scores["f1"],
+        "precision": scores["precision"],
+        "recall": scores["recall"],
+        "segments": n_segments,
+        "true_segments": len(switches[0]) + 1,
+        "seconds": seconds,
+        "warned": warned,
+        "error": error,
+    }
+
+
+def parking_sets(seeds: list[int]) -> list[tuple[str, int, list, list[np.ndarray]]]:
+    """Five supervisor demos per seed, with the supervisor's phase switches as the truth."""
+    from sb3_swirl.supervisors import collect_demos
+
+    out = []
+    for seed in seeds:
+        demos, phases = collect_demos(
+            "sb3_swirl/ParallelParking-v0", 5, seed=seed, return_phases=True
+        )
+        # a switch is the first step of a later phase than any before (a re-plan that starts
+        # the manoeuvre over in the last steps is not one)
+        switches = [np.flatnonzero(np.diff(np.maximum.accumulate(p))) + 1 for p in phases]
+        out.append(("parking", seed, demos, switches))
+    return out
+
+
+def generator_sets(seeds: list[int], quick: bool) -> list[tuple[str, int, list, list]]:
+    out = []
+    for kind in KINDS:
+        for variant in ("base", "rates") if quick else VARIANTS:
+            for seed in seeds:
+                rng = np.random.default_rng([seed, KINDS.index(kind), VARIANTS.index(variant)])
+                kwargs = variant_kwargs(variant, rng)
+                demos, switches = make_switching_demos(kind, random_state=rng, **kwargs)
+                out.append((f"{kind}/{variant}", seed, demos, switches))
+    return out
+
+
+def summarise(rows: list[dict[str, Any]], methods: list[str]) -> None:
+    by_gen: dict[str, dict[str, list[dict]]] = defaultdict(lambda: defaultdict(list))
+    for row in rows:
+        by_gen[row["generator"]][row["method"]].append(row)
+    width = max(len(g) for g in by_gen)
+    print(f"\nmedian F1 (worst) per generator; {len(rows) // len(methods)} sets")
+    print(f"{'generator':<{width}} " + " ".join(f"{m:>15}" for m in methods))
+    for gen, per in by_gen.items():
+        cells = []
+        for m in methods:
+            f1 = [r["f1"] for r in per[m]]
+            cells.append(f"{statistics.median(f1):.2f} ({min(f1):.2f})")
+        print(f"{gen:<{width}} " + " ".join(f"{c:>15}" for c in cells))
+    print("\noverall, per method")
+    for m in methods:
+        mine = [r for r in rows if r["method"] == m]
+        f1 = [r["f1"] for r in mine]
+        medians = [statistics.median(r["f1"] for r in per[m]) for per in by_gen.values()]
+        silent = sum(
+            1 for r in mine if r["segments"] <= 1 and r["true_segments"] >= 2 and not r["warned"]
+        )
+        seconds = [r["seconds"] for r in mine]
+        print(
+            f"  {m:<12} median F1 {statistics.median(f1):.3f}, mean {statistics.mean(f1):.3f}, "
+            f"worst generator (median) {min(medians):.2f}, "
+            f"sets with segments = truth {sum(r['segments'] == r['true_segments'] for r in mine)}"
+            f"/{len(mine)}, silent collapses {silent}, "
+            f"fit time median {statistics.median(seconds):.3f} s max {max(seconds):.2f} s"
+        )
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="two variants, one seed, a smoke run")
+    parser.add_argument("--split", choices=list(SEEDS), default="held-out")
+    parser.add_argument("--methods", nargs="+", choices=list(METHODS), default=list(METHODS))
+    parser.add_argument("--no-parking", action="store_true")
+    parser.add_argument("--json", help="write every row to this file")
+    args = parser.parse_args(argv)
+    seeds = SEEDS[args.split][:1] if args.quick else SEEDS[args.split]
+    sets = generator_sets(seeds, args.quick)
+    if not args.no_parking:
+        sets += parking_sets(seeds)
+    rows = []
+    for generator, seed, demos, switches in sets:
+        for method in args.methods:
+            result = score(demos, switches, METHODS[method], seed)
+            rows.append({"generator": generator, "seed": seed, "method": method, **result})
+    summarise(rows, args.methods)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(rows, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
