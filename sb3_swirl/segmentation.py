@@ -981,10 +981,9 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
             )
         if not parts:
             return
-        message = (
-            ". ".join(parts)
-            + f". The task has {len(self.regions_)} segment(s); to find more, {advice}"
-        )
+        if n_transition_regions:
+            parts.append(f"the task has {len(self.regions_)} segment(s)")
+        message = ". ".join(parts) + f". To find more, {advice}"
         warnings.warn(message, SegmentationWarning, stacklevel=3)
 
     def _check_complete(self, segments: list[np.ndarray]) -> None:

@@ -103,7 +103,7 @@ def test_the_fit_says_which_regions_it_dropped_and_which_demos_lack_them(parking
         task = fit_task(coarse, reg_covar=0.1, normalize_time=False, random_state=0)
     message = next(str(w.message) for w in record if w.category is SegmentationWarning)
     assert message.startswith("no transition region: the indicator proposed")
-    assert "The task has 1 segment" in message and task.n_segments == 1
+    assert "one segment to the goal" in message and task.n_segments == 1
     assert "min_demo_fraction=1.0 needs 5 of 5 demos" in message
     dropped = task.metadata["dropped_regions"]
     assert len(dropped) == 3 and all(d["demos"] == [4] for d in dropped)
