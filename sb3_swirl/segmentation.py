@@ -6,12 +6,17 @@ GMM clusters the transition states (state and time); clusters that do not hold a
 :class:`swirl_wrappers.Region`, and the regions, ordered by time, define the Markov segmentation
 function of the proxy task.
 
-Three indicators are provided (§9.5 of the paper compares them) and any callable
+Four indicators are provided (§9.5 of the paper compares the first three), several can be
+joined (``"gmm+velocity"``: the union of their candidates), and any callable
 ``f(states, random_state) -> list of index arrays`` can be plugged in:
 
 * :func:`gmm_indicator` -- GMM on windows normalised to their first state (the default, §5.3);
 * :func:`velocity_indicator` -- a change in the direction of velocity;
-* :func:`linear_indicator` -- a change of local linear dynamic regime.
+* :func:`linear_indicator` -- a change of local linear dynamic regime;
+* :func:`ruptures_indicator` -- change points of the velocity from the ``ruptures`` library.
+
+``benchmarks/bench_segmentation.py`` measures them against known switch points
+(:func:`switch_scores`) on :func:`sb3_swirl.datasets.make_switching_demos`.
 """
 
 from __future__ import annotations
@@ -590,7 +595,7 @@ def switch_scores(
 
 
 class SegmentationWarning(UserWarning):
-    """The segmentation dropped candidate regions that some demos share (see the message)."""
+    """The segmentation kept no transition region, or dropped regions most demos share."""
 
 
 class StrictParamsMixin:
@@ -656,11 +661,15 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
 
     Parameters
     ----------
-    indicator : {"gmm", "velocity", "linear"} or callable, default "gmm"
-        Transition indicator. A callable ``f(states, random_state) -> list of int arrays`` gets
-        the list of task-space state arrays (T_i + 1, p) and an int seed and returns candidate
-        transition steps per demonstration (use ``functools.partial`` of :func:`gmm_indicator`,
-        :func:`velocity_indicator` or :func:`linear_indicator` to change their settings).
+    indicator : {"gmm", "velocity", "linear", "ruptures"}, several joined by "+", or callable, \
+default "gmm"
+        Transition indicator (the README's "Choosing a transition indicator" compares them).
+        ``"ruptures"`` needs the ``ruptures`` package; ``"gmm+velocity"`` takes the union of
+        both indicators' candidates. A callable ``f(states, random_state) -> list of int
+        arrays`` gets the list of task-space state arrays (T_i + 1, p) and an int seed and
+        returns candidate transition steps per demonstration (use ``functools.partial`` of
+        :func:`gmm_indicator`, :func:`velocity_indicator`, :func:`linear_indicator` or
+        :func:`ruptures_indicator` to change their settings).
     window : int, optional
         Window length of the indicators (``--window`` in the CLI). By default 3 for ``"gmm"``
         and ``"velocity"``; ``"linear"`` then uses its own default, ``max(2 (p + 1), 8)``
