@@ -992,7 +992,7 @@ default "gmm"
             return
         if n_transition_regions:
             parts.append(f"the task has {len(self.regions_)} segment(s)")
-        message = ". ".join(parts) + f". To find more, {advice}"
+        message = ". ".join(p[0].upper() + p[1:] for p in parts) + f". To find more, {advice}"
         warnings.warn(message, SegmentationWarning, stacklevel=3)
 
     def _check_complete(self, segments: list[np.ndarray]) -> None:

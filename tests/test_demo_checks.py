@@ -97,12 +97,12 @@ def test_the_fit_says_which_regions_it_dropped_and_which_demos_lack_them(parking
     coarse = [*parking_states[:4], parking_states[4][::7]]
     with (
         pytest.warns(DemoWarning, match="demo 4"),
-        pytest.warns(SegmentationWarning, match=r"dropped 3 .*none from demos \[4\]") as record,
+        pytest.warns(SegmentationWarning, match=r"Dropped 3 .*none from demos \[4\]") as record,
     ):
         # step by step, the coarse demo hides every transition the others share
         task = fit_task(coarse, reg_covar=0.1, normalize_time=False, random_state=0)
     message = next(str(w.message) for w in record if w.category is SegmentationWarning)
-    assert message.startswith("no transition region: the indicator proposed")
+    assert message.startswith("No transition region: the indicator proposed")
     assert "one segment to the goal" in message and task.n_segments == 1
     assert "min_demo_fraction=1.0 needs 5 of 5 demos" in message
     dropped = task.metadata["dropped_regions"]
