@@ -12,7 +12,13 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).parent
-FAST = ["bench_wrappers.py", "bench_envs.py", "bench_fit.py", "bench_demo_checks.py"]
+FAST = [
+    "bench_wrappers.py",
+    "bench_envs.py",
+    "bench_fit.py",
+    "bench_demo_checks.py",
+    "bench_segmentation.py",
+]
 SLOW = ["sample_efficiency.py"]
 
 
