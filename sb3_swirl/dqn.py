@@ -65,6 +65,9 @@ class SwirlDQN(DQN):
         Minibatch size, drawn so that every segment weighs the same.
     demo_loss_coef : float
         Weight of the supervised demo loss in every Q-learning update (0: plain DQN updates).
+    double_q : bool
+        Double DQN's TD target (van Hasselt et al., 2016): the online network picks the next
+        action, the target network scores it, which curbs the over-estimation of the max.
     prefill_replay : bool
         Add the demo transitions (proxy reward, done at each demo's end) to the replay buffer.
     infer_actions : {"inverse_dynamics", "none"}
@@ -121,6 +124,7 @@ class SwirlDQN(DQN):
         bc_lr: float = 1e-3,
         bc_batch_size: int = 64,
         demo_loss_coef: float = 1.0,
+        double_q: bool = False,
         prefill_replay: bool = False,
         infer_actions: Literal["inverse_dynamics", "none"] = "inverse_dynamics",
         inverse_dynamics_steps: int = 2000,
@@ -133,6 +137,7 @@ class SwirlDQN(DQN):
         self.bc_lr = check_real("bc_lr", bc_lr, low=0.0, low_open=True)
         self.bc_batch_size = check_int("bc_batch_size", bc_batch_size, low=1)
         self.demo_loss_coef = check_real("demo_loss_coef", demo_loss_coef, low=0.0)
+        self.double_q = check_bool("double_q", double_q)
         self.prefill_replay = check_bool("prefill_replay", prefill_replay)
         self.infer_actions = check_option(
             "infer_actions", infer_actions, ("inverse_dynamics", "none")
@@ -303,8 +308,10 @@ class SwirlDQN(DQN):
         return super()._sample_action(learning_starts, action_noise, n_envs)
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
-        """DQN's TD update, plus DQfD's supervised loss on demo pairs when ``demo_loss_coef``."""
-        if not (self.demo_loss_coef > 0 and self._demo is not None):
+        """DQN's TD update (Double DQN's target with ``double_q``), plus DQfD's supervised loss
+        on demo pairs when ``demo_loss_coef``."""
+        with_demo = self.demo_loss_coef > 0 and self._demo is not None
+        if not (with_demo or self.double_q):
             return super().train(gradient_steps, batch_size)
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
@@ -313,26 +320,39 @@ class SwirlDQN(DQN):
         for _ in range(gradient_steps):
             replay_data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
             discounts = replay_data.discounts if replay_data.discounts is not None else self.gamma
-            with th.no_grad():
-                next_q = self.q_net_target(replay_data.next_observations).max(dim=1).values
-                target = replay_data.rewards + (1 - replay_data.dones) * discounts * next_q[:, None]
+            target = self._td_target(replay_data.next_observations)
+            target = replay_data.rewards + (1 - replay_data.dones) * discounts * target[:, None]
             current = th.gather(self.q_net(replay_data.observations), 1, replay_data.actions.long())
             loss = F.smooth_l1_loss(current, target)
-            rows = th.multinomial(demo["weights"], batch_size, True, generator=self._demo_gen)
-            rows = rows.to(self.device)
-            demo_loss = self._supervised_loss(
-                self.q_net(self._demo_obs(rows)), demo["actions"][rows]
-            )
             losses.append(loss.item())
-            demo_losses.append(demo_loss.item())
+            if with_demo:
+                assert demo is not None
+                rows = th.multinomial(demo["weights"], batch_size, True, generator=self._demo_gen)
+                rows = rows.to(self.device)
+                demo_loss = self._supervised_loss(
+                    self.q_net(self._demo_obs(rows)), demo["actions"][rows]
+                )
+                demo_losses.append(demo_loss.item())
+                loss = loss + self.demo_loss_coef * demo_loss
             self.policy.optimizer.zero_grad()
-            (loss + self.demo_loss_coef * demo_loss).backward()
+            loss.backward()
             th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
             self.policy.optimizer.step()
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/loss", np.mean(losses))
-        self.logger.record("train/demo_loss", np.mean(demo_losses))
+        if demo_losses:
+            self.logger.record("train/demo_loss", np.mean(demo_losses))
+
+    @th.no_grad()
+    def _td_target(self, next_observations: th.Tensor) -> th.Tensor:
+        """The value of the next states: ``max_a Q_target(s', a)``, or with ``double_q``
+        ``Q_target(s', argmax_a Q(s', a))``."""
+        next_q = self.q_net_target(next_observations)
+        if not self.double_q:
+            return next_q.max(dim=1).values
+        best = self.q_net(next_observations).argmax(dim=1, keepdim=True)
+        return next_q.gather(1, best)[:, 0]
 
     # ------------------------------------------------------------------ demonstrations
     def _demo_transitions(self) -> list[dict[str, Any]]:

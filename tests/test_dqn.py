@@ -96,6 +96,20 @@ def success_count(model, env: gym.Env, n_episodes: int, seed: int) -> int:
     return successes
 
 
+def test_double_q_scores_the_online_nets_action_with_the_target_net():
+    model = SwirlDQN("MlpPolicy", point_env(), demonstrations=point_demos(2), seed=0)
+    obs = th.as_tensor(np.stack([model.observation_space.sample() for _ in range(16)]))
+    with th.no_grad():
+        for p in model.q_net_target.parameters():  # a target net that disagrees
+            p.add_(th.randn_like(p))
+        online, target = model.q_net(obs), model.q_net_target(obs)
+    np.testing.assert_allclose(model._td_target(obs), target.max(dim=1).values)
+    model.double_q = True
+    pick = online.argmax(dim=1)
+    np.testing.assert_allclose(model._td_target(obs), target[th.arange(16), pick])
+    assert (model._td_target(obs) <= target.max(dim=1).values + 1e-6).all()
+
+
 def test_plain_env_is_rejected_with_a_hint():
     with pytest.raises(ValueError, match=r"SwirlWrapper\(.*make_swirl_env"):
         SwirlDQN("MlpPolicy", gym.make(PARKING))
@@ -158,6 +172,7 @@ def test_a_batch_larger_than_the_demo_pairs_is_all_of_them():
         (dict(bc_batch_size="64"), "bc_batch_size must be an integer"),
         (dict(task="task.json"), "task must be a swirl_wrappers.TaskModel, got str"),
         (dict(prefill_replay=True, n_steps=3), "prefill_replay"),
+        (dict(double_q=1), "double_q"),
         (dict(prefill_replay=True, optimize_memory_usage=True, replay_buffer_kwargs={}), "1-step"),
     ],
 )
