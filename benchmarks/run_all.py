@@ -19,7 +19,7 @@ FAST = [
     "bench_demo_checks.py",
     "bench_segmentation.py",
 ]
-SLOW = ["sample_efficiency.py"]
+SLOW = ["sample_efficiency.py", "swirl_dqn_stability.py"]
 
 
 def main() -> int:

@@ -128,9 +128,11 @@ def train_and_evaluate(
     total_timesteps: int,
     seed: int,
     progress: bool = True,
+    hyperparams: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train ``algo`` ("swirl_dqn" or "dqn") and evaluate true success along the way.
 
+    ``hyperparams`` (rl-zoo format) default to ``zoo_configs/{algo}.yml``'s for the env.
     Returns the learning curve (timesteps, training episodes, success rate, true return at each
     evaluation), the final success rate and the wall time.
     """
@@ -141,7 +143,8 @@ def train_and_evaluate(
     from swirl_wrappers import SwirlWrapper
 
     check_int("total_timesteps", total_timesteps, low=1)
-    hyperparams = load_hyperparams(algo, preset.env_id)
+    if hyperparams is None:
+        hyperparams = load_hyperparams(algo, preset.env_id)
     kwargs = _algo_kwargs(hyperparams)
     policy = hyperparams.get("policy", "MlpPolicy")
 
