@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 
 from sb3_swirl.demos import as_demonstrations
+from sb3_swirl.segmentation import turn_angles
 from swirl_wrappers import TaskModel
 from swirl_wrappers._io import atomic_write
 
@@ -203,10 +204,7 @@ def plot_transitions(
         ax.plot(np.arange(1, len(z)), speed, color="tab:gray", lw=1.0, label="speed")
         twin = ax.twinx()
         if len(z) > 2 * w:
-            before, after = z[w:-w] - z[: -2 * w], z[2 * w :] - z[w:-w]
-            norm = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
-            cos = np.einsum("ij,ij->i", before, after) / np.where(norm > 0, norm, 1.0)
-            angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+            angle = np.degrees(turn_angles(z, w))
             twin.plot(np.arange(w, len(z) - w), angle, color="tab:blue", lw=1.0)
         twin.set_ylim(0, 180)
         twin.set_ylabel("turn (°)", color="tab:blue", fontsize="small")

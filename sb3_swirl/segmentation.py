@@ -215,6 +215,20 @@ def gmm_indicator(
     return out
 
 
+def turn_angles(x: np.ndarray, window: int, min_speed: float = 0.0) -> np.ndarray:
+    """The change of direction of motion at steps ``window .. len(x) - window - 1``.
+
+    The angle (radians) between the displacement over the ``window`` steps before a step and
+    over the ``window`` steps after it; 0 where either is not longer than ``min_speed``.
+    """
+    before = x[window:-window] - x[: -2 * window]
+    after = x[2 * window :] - x[window:-window]
+    nb, na = np.linalg.norm(before, axis=1), np.linalg.norm(after, axis=1)
+    valid = (nb > min_speed) & (na > min_speed)
+    cos = np.einsum("ij,ij->i", before, after) / np.where(valid, nb * na, 1.0)
+    return np.where(valid, np.arccos(np.clip(cos, -1.0, 1.0)), 0.0)
+
+
 def velocity_indicator(
     states: list[np.ndarray],
     random_state: Any = None,
@@ -253,12 +267,7 @@ def velocity_indicator(
         if len(x) < 2 * window + 1:
             out.append(np.zeros(0, dtype=np.int64))
             continue
-        before = x[window:-window] - x[: -2 * window]
-        after = x[2 * window :] - x[window:-window]
-        nb, na = np.linalg.norm(before, axis=1), np.linalg.norm(after, axis=1)
-        valid = (nb > floor) & (na > floor)
-        cos = np.einsum("ij,ij->i", before, after) / np.where(valid, nb * na, 1.0)
-        angle = np.where(valid, np.arccos(np.clip(cos, -1.0, 1.0)), 0.0)
+        angle = turn_angles(x, window, floor)
         out.append(_interior(_local_maxima(angle, angle_threshold, window) + window, len(x)))
     return out
 
