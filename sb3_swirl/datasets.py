@@ -28,6 +28,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from sb3_swirl.demos import Demonstration
+from swirl_wrappers._validation import check_int
 
 KINDS = ("constant_velocity", "goal_reaching", "linear_dynamics", "one_dimension")
 
@@ -97,9 +98,8 @@ def _phases(
                 return math.atan2(abs(r1 @ v * (r0 @ u) - r1 @ u * (r0 @ v)), r1 @ r0) >= a * 0.999
 
             phases.append((lambda y, c=centre, m=rot: m @ (y - c), guard))
-            # nominal end state, the next phase's centre is placed from it
-            ang = turn
-            x = centre + radius * (math.cos(ang) * u + math.sin(ang) * v)
+            # the nominal end state: the next phase's centre is placed from it
+            x = centre + radius * (math.cos(turn) * u + math.sin(turn) * v)
     elif kind == "one_dimension":
         drift = rng.normal(size=dim) * 0.5
         drift[0] = 0.0
@@ -197,6 +197,11 @@ def make_switching_demos(
     """
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    n_demos, n_phases, dim = (
+        check_int(k, v, low=1)
+        for k, v in (("n_demos", n_demos), ("n_phases", n_phases), ("dim", dim))
+    )
+    nuisance_dims = check_int("nuisance_dims", nuisance_dims, low=0)
     if not 0.0 <= time_warp < 1.0:
         raise ValueError(f"time_warp must be in [0, 1), got {time_warp}")
     if speed_ratio < 1.0:

@@ -52,6 +52,8 @@ def test_generator_rejects_bad_arguments():
         make_switching_demos(rates=(1, 0.5))
     with pytest.raises(ValueError, match="time_warp"):
         make_switching_demos(time_warp=1.0)
+    with pytest.raises(ValueError, match="dim"):
+        make_switching_demos(dim=0)
 
 
 @pytest.mark.parametrize("kind", KINDS)
