@@ -29,7 +29,7 @@ kernel on velocities) run per demo, then the same cross-demo consensus (clusteri
 and settings as ours.
 
 Run: ``python benchmarks/bench_segmentation.py [--quick] [--split tuning|held-out]
-[--methods default gmm ...] [--json out.json]``.
+[--methods default velocity ...] [--no-parking] [--json out.json]``.
 """
 
 from __future__ import annotations

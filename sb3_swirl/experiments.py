@@ -51,7 +51,7 @@ PRESETS: dict[str, Preset] = {
         20,
         0.95,
         # tuned without time normalisation; with it (the new default), the held-out median
-        # rollout ratio read 0.058 against 0.040 (README, segmentation section)
+        # rollout ratio read 0.058 against 0.041 without (README, Results)
         fit_kwargs={"reg_covar": 0.1, "normalize_time": False},
     ),
     # Raw wrapped angles cannot hold the goal (tip above the line) in one ellipsoid; the
