@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo demo-acrobot test test-slow bench lint format clean
+.PHONY: install demo demo-acrobot demo-linecutting test test-slow bench lint format clean
 
 install: $(STAMP)
 
@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml wrappers/pyproject.toml Makefile
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# torch first, pinned: an unpinned torch pulls a multi-GB CUDA build
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e ./wrappers -e ".[zoo,render,dev]"
+	$(BIN)/python -m pip install --quiet -e ./wrappers -e ".[zoo,render,robosuite,dev]"
 	# imitation pins old SB3/gymnasium; its data types work with ours (see NOTES-stack.md)
 	$(BIN)/python -m pip install --quiet --no-deps imitation==1.0.1 seals==0.2.1
 	touch $(STAMP)
@@ -23,6 +23,9 @@ demo: install
 
 demo-acrobot: install
 	$(BIN)/sb3-swirl demo acrobot
+
+demo-linecutting: install
+	$(BIN)/sb3-swirl demo linecutting
 
 test: install
 	$(BIN)/ruff check . && $(BIN)/ruff format --check .

@@ -21,11 +21,11 @@ from sb3_swirl.demos import (
     to_minari,
 )
 from sb3_swirl.dqn import SwirlDQN
-from sb3_swirl.envs import NoisyAcrobotEnv, ParallelParkingEnv
+from sb3_swirl.envs import DVRKLineCuttingEnv, NoisyAcrobotEnv, ParallelParkingEnv
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.fitting import fit_task
 from sb3_swirl.inverse_dynamics import InverseDynamics
-from sb3_swirl.plotting import plot_rewards, plot_segments, plot_transitions
+from sb3_swirl.plotting import plot_cut_paths, plot_rewards, plot_segments, plot_transitions
 from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
 from sb3_swirl.segmentation import (
     SegmentationWarning,
@@ -38,6 +38,7 @@ from sb3_swirl.vec_env import SwirlVecEnv, get_swirl_attr, make_swirl_env
 from swirl_wrappers import RewardConfig, SwirlVectorWrapper, SwirlWrapper, TaskModel
 
 __all__ = [
+    "DVRKLineCuttingEnv",
     "DemoWarning",
     "Demonstration",
     "InverseDynamics",
@@ -64,6 +65,7 @@ __all__ = [
     "load_demos",
     "make_swirl_env",
     "make_switching_demos",
+    "plot_cut_paths",
     "plot_rewards",
     "plot_segments",
     "plot_transitions",

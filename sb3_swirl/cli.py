@@ -245,7 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_show)
 
     p = sub.add_parser("demo", help="the main job: SWIRL vs DQN on a shipped task")
-    p.add_argument("task", choices=["parking", "acrobot"])
+    p.add_argument("task", choices=["parking", "acrobot", "linecutting"])
     p.add_argument("--seed", type=_seed, default=0)
     p.add_argument("--n-demos", type=int, default=None)
     p.add_argument("--timesteps", type=int, default=None, help="training steps per method")

@@ -37,6 +37,8 @@ class Preset:
     n_eval_episodes: int
     target_success: float
     fit_kwargs: dict[str, Any] = field(default_factory=dict)
+    #: ``gym.make`` arguments of the env the supervisor demonstrates on
+    demo_env_kwargs: dict[str, Any] = field(default_factory=dict)
 
 
 PRESETS: dict[str, Preset] = {
@@ -70,6 +72,17 @@ PRESETS: dict[str, Preset] = {
             "reg_covar": 1e-3,
             "normalize_time": False,
         },
+    ),
+    # The paper's §10.2: five demos on straight lines at random positions (±1 cm); the agent
+    # then learns on one line.
+    "linecutting": Preset(
+        "sb3_swirl/DVRKLineCutting-v0",
+        5,
+        6_000,
+        500,
+        10,
+        0.95,
+        demo_env_kwargs={"line_jitter": 1.0},
     ),
 }
 
@@ -129,12 +142,14 @@ def train_and_evaluate(
     seed: int,
     progress: bool = True,
     hyperparams: dict[str, Any] | None = None,
+    keep_model: bool = False,
 ) -> dict[str, Any]:
     """Train ``algo`` ("swirl_dqn" or "dqn") and evaluate true success along the way.
 
     ``hyperparams`` (rl-zoo format) default to ``zoo_configs/{algo}.yml``'s for the env.
     Returns the learning curve (timesteps, training episodes, success rate, true return at each
-    evaluation), the final success rate and the wall time.
+    evaluation), the final success rate and the wall time; with ``keep_model``, also the trained
+    model and its evaluation env under ``"model"`` and ``"eval_env"`` (not JSON).
     """
     from stable_baselines3 import DQN
 
@@ -197,7 +212,7 @@ def train_and_evaluate(
         "best_success_episodes": best["episodes"] if best else None,
         "rollouts_to_target": rollouts_to_success(curve, preset.target_success),
         "wall_time_s": wall,
-    }
+    } | ({"model": model, "eval_env": eval_env} if keep_model else {})
 
 
 def write_results(results: dict[str, Any], path: str | Path) -> None:
@@ -240,7 +255,7 @@ def run_demo(
 
     Parameters
     ----------
-    name : {"parking", "acrobot"}
+    name : {"parking", "acrobot", "linecutting"}
     seed : int
         Seeds the demos, the SWIRL fit, both learners and the evaluation envs.
     n_demos, total_timesteps : int, optional
@@ -270,7 +285,9 @@ def run_demo(
     out.mkdir(parents=True, exist_ok=True)
 
     console.rule(f"[bold]SWIRL vs DQN on {preset.env_id}")
-    demos = collect_demos(preset.env_id, n_demos, seed=seed, progress=progress)
+    demos = collect_demos(
+        preset.env_id, n_demos, seed=seed, progress=progress, **preset.demo_env_kwargs
+    )
     console.print(f"{n_demos} supervisor demos, {sum(len(d) for d in demos)} steps")
     fit_start = time.perf_counter()
     task = fit_task(demos, random_state=seed, **preset.fit_kwargs)
@@ -291,8 +308,16 @@ def run_demo(
                 total_timesteps=steps,
                 seed=seed,
                 progress=progress,
+                keep_model=True,
             )
         )
+    models = [(run.pop("model"), run.pop("eval_env")) for run in runs]
+    pictures = ["segments.png"]
+    if preset.env_id == "sb3_swirl/DVRKLineCutting-v0":
+        from sb3_swirl.plotting import plot_cut_paths
+
+        plot_cut_paths(*models[0], path=out / "cut_paths.png", seed=seed)
+        pictures.append("cut_paths.png")
     swirl, dqn = runs
     ratio = None
     if swirl["rollouts_to_target"] is not None and dqn["rollouts_to_target"]:
@@ -328,5 +353,5 @@ def run_demo(
     Console().print(table)
     if ratio is not None:
         console.print(f"SWIRL needed {ratio:.2f}× DQN's rollouts")
-    console.print(f"wrote {out}/results.json, learning_curve.png, segments.png, task.json")
+    console.print(f"wrote {out}/results.json, learning_curve.png, {', '.join(pictures)}, task.json")
     return results

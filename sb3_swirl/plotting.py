@@ -287,3 +287,51 @@ def plot_rewards(task: TaskModel, *, path: str | os.PathLike | None = None) -> F
         fig.colorbar(image, ax=ax, shrink=0.8)
     fig.suptitle("Reward matrices Ψ_i (larger: deviation penalised more)")
     return _finish(fig, path)
+
+
+def plot_cut_paths(
+    model: Any,
+    env: Any,
+    *,
+    n_episodes: int = 3,
+    seed: int = 0,
+    path: str | os.PathLike | None = None,
+) -> Figure:
+    """The tool paths of a policy's greedy episodes over the marked line (line cutting).
+
+    ``env`` is a (possibly wrapped) :class:`~sb3_swirl.envs.dvrk.DVRKLineCuttingEnv`; each
+    episode is reset with ``seed + i``. Successful cuts are drawn solid, failed ones dashed.
+    """
+    base = env.unwrapped
+    fig = _new_figure((6, 4.5))
+    ax = fig.add_subplot()
+    colors = _colors(n_episodes)
+    line = None
+    for i in range(n_episodes):
+        obs, _ = env.reset(seed=seed + i)
+        line = base.line * 100.0
+        tool = [base.tool_position[:2] * 100.0]
+        while True:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, terminated, truncated, info = env.step(int(action))
+            tool.append(base.tool_position[:2] * 100.0)
+            if terminated or truncated:
+                break
+        tool = np.array(tool)
+        ok = bool(info.get("is_success"))
+        label = f"episode {i}: " + (
+            f"cut, errors {info['position_error_cm']:.2f} / {info['tracking_error_cm']:.2f} cm"
+            if ok
+            else "failed"
+        )
+        ax.plot(*tool.T, color=colors[i], linestyle="-" if ok else "--", label=label)
+        ax.plot(*tool[0], "o", color=colors[i], markersize=4)
+    ax.plot(*line.T, color="black", linewidth=3, alpha=0.6, label="marked line")
+    ax.plot(*line[0], "k>", markersize=8)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (cm)")
+    ax.set_ylabel("y (cm)")
+    ax.set_title("tool paths (greedy policy); errors: position / tracking")
+    ax.legend(loc="best", fontsize=8)
+    ax.grid(alpha=0.3)
+    return _finish(fig, path)

@@ -1,8 +1,13 @@
-"""The paper's simulated tasks, registered with gymnasium under the ``sb3_swirl/`` namespace."""
+"""The paper's tasks, registered with gymnasium under the ``sb3_swirl/`` namespace.
+
+The dVRK tasks (:mod:`sb3_swirl.envs.dvrk`) need the ``robosuite`` extra; their ids are
+registered here all the same, and robosuite is imported only when one is made.
+"""
 
 from gymnasium.envs.registration import register
 
 from sb3_swirl.envs.acrobot import NoisyAcrobotEnv
+from sb3_swirl.envs.dvrk import DVRKLineCuttingEnv
 from sb3_swirl.envs.parking import ParallelParkingEnv
 
 register(
@@ -28,4 +33,10 @@ register(
     max_episode_steps=1000,
 )
 
-__all__ = ["NoisyAcrobotEnv", "ParallelParkingEnv"]
+register(
+    id="sb3_swirl/DVRKLineCutting-v0",
+    entry_point="sb3_swirl.envs.dvrk.line_cutting:DVRKLineCuttingEnv",
+    max_episode_steps=150,
+)
+
+__all__ = ["DVRKLineCuttingEnv", "NoisyAcrobotEnv", "ParallelParkingEnv"]

@@ -24,6 +24,7 @@ import numpy as np
 import sb3_swirl.envs  # noqa: F401  (registers the sb3_swirl/ env ids)
 from sb3_swirl.demos import Demonstration
 from sb3_swirl.supervisors.acrobot import AcrobotSupervisor
+from sb3_swirl.supervisors.line_cutting import LineCuttingSupervisor
 from swirl_wrappers._validation import check_int
 
 #: env id -> ``"module:Class"`` of its supervisor, imported on first use
@@ -32,6 +33,7 @@ SUPERVISORS: dict[str, str] = {
     "sb3_swirl/ParallelParkingPartial-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
     "sb3_swirl/ParallelParkingPerturbed-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
     "sb3_swirl/NoisyAcrobot-v0": "sb3_swirl.supervisors.acrobot:AcrobotSupervisor",
+    "sb3_swirl/DVRKLineCutting-v0": ("sb3_swirl.supervisors.line_cutting:LineCuttingSupervisor"),
 }
 
 
@@ -206,4 +208,11 @@ def _progress_bar(enabled: bool, description: str, total: int) -> Iterator[Calla
         yield lambda: bar.advance(task)
 
 
-__all__ = ["SUPERVISORS", "AcrobotSupervisor", "Supervisor", "collect_demos", "supervisor_for"]
+__all__ = [
+    "SUPERVISORS",
+    "AcrobotSupervisor",
+    "LineCuttingSupervisor",
+    "Supervisor",
+    "collect_demos",
+    "supervisor_for",
+]

@@ -1,0 +1,247 @@
+"""Surgical line cutting on robosuite (paper §10.2): position at a marked line, then follow it."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from sb3_swirl.envs.dvrk._robosuite import TABLE_TOP, RobosuiteStepEnv, robosuite_task
+from swirl_wrappers._validation import check_real
+
+#: Action indices of :class:`DVRKLineCuttingEnv`: one 2 mm step of the tool.
+PLUS_X, MINUS_X, PLUS_Y, MINUS_Y = range(4)
+_DIRECTIONS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+
+
+def line_points(radius: float | None, length: float, n: int = 200) -> np.ndarray:
+    """Points (n + 1, 2) of a line that starts at the origin heading along +x.
+
+    ``radius=None`` gives a straight line; otherwise an arc of that radius (m) that bends
+    towards +y, of arc length ``length`` (m).
+    """
+    s = np.linspace(0.0, length, n + 1)
+    if radius is None:
+        return np.stack([s, np.zeros_like(s)], axis=1)
+    angle = s / radius
+    return np.stack([radius * np.sin(angle), radius * (1.0 - np.cos(angle))], axis=1)
+
+
+def distance_to_polyline(point: np.ndarray, points: np.ndarray) -> tuple[float, float]:
+    """Distance from ``point`` (2,) to the polyline ``points`` (n, 2) and the arc length of
+    its nearest point (both in the units of the inputs)."""
+    a, b = points[:-1], points[1:]
+    ab = b - a
+    seg_len2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", point - a, ab) / seg_len2, 0.0, 1.0)
+    nearest = a + t[:, None] * ab
+    dist = np.linalg.norm(point - nearest, axis=1)
+    i = int(np.argmin(dist))
+    seg_len = np.sqrt(seg_len2)
+    return float(dist[i]), float(seg_len[:i].sum() + t[i] * seg_len[i])
+
+
+def _build_task(base: type) -> type:
+    from robosuite.models.arenas import TableArena
+    from robosuite.models.tasks import ManipulationTask
+    from robosuite.utils.mjcf_utils import new_body, new_geom
+
+    class LineCuttingTask(base):
+        """robosuite scene: the arm over a table with a marked line (visual only)."""
+
+        def __init__(self, line_shape: np.ndarray, **kwargs: Any) -> None:
+            self.line_shape = line_shape
+            self.model_timestep_override = 0.004
+            super().__init__(**kwargs)
+
+        def _load_model(self) -> None:
+            super()._load_model()
+            robot = self.robots[0].robot_model
+            robot.set_base_xpos(robot.base_xpos_offset["table"](0.8))
+            arena = TableArena(table_full_size=(0.8, 0.8, 0.05), table_offset=(0, 0, TABLE_TOP))
+            arena.set_origin([0, 0, 0])
+            line = new_body(name="marked_line", pos=(0.0, 0.0, TABLE_TOP + 0.0005))
+            for i, (p, q) in enumerate(zip(self.line_shape[:-1], self.line_shape[1:], strict=True)):
+                line.append(
+                    new_geom(
+                        name=f"line_{i}",
+                        type="capsule",
+                        size=(0.0008,),
+                        fromto=f"{p[0]} {p[1]} 0 {q[0]} {q[1]} 0",
+                        rgba=(0.05, 0.05, 0.05, 1.0),
+                        contype=0,
+                        conaffinity=0,
+                        group=1,
+                    )
+                )
+            arena.worldbody.append(line)
+            self.model = ManipulationTask(
+                mujoco_arena=arena, mujoco_robots=[r.robot_model for r in self.robots]
+            )
+
+        def _setup_references(self) -> None:
+            super()._setup_references()
+            self.line_body_id = self.sim.model.body_name2id("marked_line")
+
+    return LineCuttingTask
+
+
+class DVRKLineCuttingEnv(RobosuiteStepEnv):
+    """Cut along a line marked on gauze: move to its start, then follow it (paper §10.2).
+
+    A robosuite arm (a Panda by default; its closed gripper stands in for the dVRK's scissors)
+    holds its tool 1 cm above a table and moves it in the table plane in 2 mm steps at 10 Hz.
+    A line is drawn on the table (visual only): straight (the training lines) or an arc of
+    radius ``radius`` (the paper's test lines, 4.0 down to 1.5 cm), 5 cm long, starting at
+    ``line_start`` and heading along +x.
+
+    ======  =======  =============================
+    action  name     effect
+    ======  =======  =============================
+    0       +x       the tool moves 2 mm along +x
+    1       -x       2 mm along -x
+    2       +y       2 mm along +y
+    3       -y       2 mm along -y
+    ======  =======  =============================
+
+    **Observation** ``(x, y, d)`` in centimetres (float32): the tool's position relative to the
+    table centre and its distance to the marked line — the paper's *pix* feature, computed
+    exactly from the geometry instead of from a camera.
+
+    **Episode.** The tool starts at a random place 2–4 cm before the line's start and up to
+    2 cm to either side. The cut begins at the first step the tool is within ``on_line``
+    (3 mm) of the line; the *position error* is then its distance to the line's start. The cut
+    succeeds when the tool reaches the end of the line having never been more than
+    ``tolerance`` (1 cm) from it; it fails, and the episode ends, when the position error
+    exceeds ``tolerance`` or the tool leaves the line by more than ``tolerance``. Reward 1.0 on
+    success, 0 otherwise. The registered id truncates at 150 steps. ``info`` holds
+    ``line_distance_cm``, ``cutting``, ``is_success`` and, once the cut has begun,
+    ``position_error_cm`` and ``tracking_error_cm`` (the mean distance to the line so far).
+
+    Parameters
+    ----------
+    radius : float, optional
+        Radius of the line in cm; ``None`` (default) for a straight line.
+    line_start : (float, float), default (-2.0, -1.0)
+        Start of the line (cm, relative to the table centre).
+    line_jitter : float, default 0.0
+        Each reset moves the line by up to this many cm along y (training lines "at random
+        positions"); 0 keeps it fixed.
+    robot : str, default "Panda"
+        A single-arm robosuite robot.
+    render_mode : {"rgb_array"}, optional
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import sb3_swirl.envs
+    >>> env = gym.make("sb3_swirl/DVRKLineCutting-v0", radius=3.0)
+    >>> obs, info = env.reset(seed=0)
+    >>> obs.shape, env.action_space
+    ((3,), Discrete(4))
+    """
+
+    line_length = 0.05
+    tool_height = 0.01
+    on_line = 0.003
+    tolerance = 0.01
+
+    def __init__(
+        self,
+        radius: float | None = None,
+        line_start: tuple[float, float] = (-2.0, -1.0),
+        line_jitter: float = 0.0,
+        robot: str = "Panda",
+        render_mode: str | None = None,
+    ) -> None:
+        if radius is not None:
+            radius = check_real("radius", radius, low=0.5, high=100.0)
+        line_jitter = check_real("line_jitter", line_jitter, low=0.0, high=3.0)
+        start = np.asarray(line_start, dtype=np.float64)
+        if start.shape != (2,) or not np.all(np.abs(start) <= 5.0):
+            raise ValueError(
+                "line_start must be (x, y) in cm within 5 cm of the table centre, "
+                f"got {line_start!r}"
+            )
+        self.radius = radius
+        self.line_start = start / 100.0
+        self.line_jitter = line_jitter / 100.0
+        self._shape = line_points(None if radius is None else radius / 100.0, self.line_length)
+        self._line = self._shape + self.line_start
+        z = TABLE_TOP + self.tool_height
+        super().__init__(
+            robot=robot,
+            workspace_low=np.array([-0.10, -0.10, z]),
+            workspace_high=np.array([0.10, 0.10, z]),
+            render_mode=render_mode,
+        )
+        self.action_space = spaces.Discrete(4)
+        self.observation_space = spaces.Box(
+            np.array([-15.0, -15.0, 0.0], dtype=np.float32),
+            np.array([15.0, 15.0, 40.0], dtype=np.float32),
+            dtype=np.float32,
+        )
+        self._cutting = False
+        self._errors: list[float] = []
+        self._position_error = float("nan")
+
+    def _task_class(self) -> type:
+        return robosuite_task("SwirlLineCuttingTask", _build_task)
+
+    def _task_kwargs(self) -> dict[str, Any]:
+        return {"line_shape": self._shape}
+
+    def _home_position(self) -> np.ndarray:
+        return np.array([*(self.line_start - [0.03, 0.0]), TABLE_TOP + self.tool_height])
+
+    @property
+    def line(self) -> np.ndarray:
+        """The current line as points (n, 2) in the world frame (m)."""
+        return self._line.copy()
+
+    def line_distance(self, xy: np.ndarray) -> tuple[float, float]:
+        """Distance (m) of a world point ``xy`` to the line and the arc length of its nearest
+        point (m, 0 at the line's start)."""
+        return distance_to_polyline(np.asarray(xy, dtype=np.float64), self._line)
+
+    def _after_reset(self) -> np.ndarray:
+        rng = self.np_random
+        offset = np.array([0.0, rng.uniform(-self.line_jitter, self.line_jitter)])
+        self._line = self._shape + self.line_start + offset
+        self.sim.model.body_pos[self._task.line_body_id][:2] = self._line[0]
+        self._cutting = False
+        self._errors = []
+        self._position_error = float("nan")
+        start = self._line[0] + [rng.uniform(-0.04, -0.02), rng.uniform(-0.02, 0.02)]
+        return np.array([*start, TABLE_TOP + self.tool_height])
+
+    def _apply(self, action: int) -> None:
+        target = self._goal.copy()
+        target[:2] += self.step_size * _DIRECTIONS[action]
+        self._command(target, grip=1.0)
+
+    def _observe(self) -> np.ndarray:
+        xy = self.tool_position[:2]
+        d, _ = self.line_distance(xy)
+        return (np.array([*xy, d]) * 100.0).astype(np.float32)
+
+    def _evaluate(self) -> tuple[float, bool, dict[str, Any]]:
+        d, s = self.line_distance(self.tool_position[:2])
+        if not self._cutting and d <= self.on_line:
+            self._cutting = True
+            self._position_error = float(np.linalg.norm(self.tool_position[:2] - self._line[0]))
+        info: dict[str, Any] = {
+            "line_distance_cm": 100.0 * d,
+            "cutting": self._cutting,
+            "is_success": False,
+        }
+        if not self._cutting:
+            return 0.0, False, info
+        self._errors.append(d)
+        info["position_error_cm"] = 100.0 * self._position_error
+        info["tracking_error_cm"] = 100.0 * float(np.mean(self._errors))
+        failed = self._position_error > self.tolerance or d > self.tolerance
+        done = s >= self.line_length - self.step_size
+        info["is_success"] = success = done and not failed
+        return float(success), failed or done, info

@@ -1,0 +1,110 @@
+"""Kinesthetic-like supervisor for :class:`~sb3_swirl.envs.dvrk.DVRKLineCuttingEnv`."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+
+from sb3_swirl.envs.dvrk.line_cutting import _DIRECTIONS, PLUS_X, DVRKLineCuttingEnv
+
+#: The supervisor's phases: move to the line's start, then follow the line.
+POSITION, FOLLOW = range(2)
+
+
+class LineCuttingSupervisor:
+    """Go to the start of the line, then follow it, in 2 mm steps.
+
+    It plans on the commanded tool position (where the arm is being taken, as a person moving
+    the arm by hand knows) and the line's geometry. The arm trails its commands by a few
+    millimetres, so it first lines up ``approach`` behind the start, on the line's extension
+    (stepping along either useful axis, chosen at random with ``seed`` so demos from the same
+    start differ), then moves in along the line; following steps towards the point of the line
+    ``lookahead`` ahead of the tool's nearest point.
+
+    Parameters
+    ----------
+    env : DVRKLineCuttingEnv
+        The environment to control (wrappers are looked through with ``env.unwrapped``).
+    seed : int, optional
+        Seeds the choice between the two axes while positioning.
+    lookahead : float, default 0.004
+        How far ahead along the line (m) the follower aims.
+    approach : float, default 0.012
+        Length (m) of the straight run-in to the line's start.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import sb3_swirl.envs
+    >>> env = gym.make("sb3_swirl/DVRKLineCutting-v0")
+    >>> sup = LineCuttingSupervisor(env.unwrapped, seed=0)
+    >>> obs, info = env.reset(seed=0)
+    >>> sup.reset(obs)
+    >>> while True:
+    ...     obs, reward, terminated, truncated, info = env.step(sup.act(obs))
+    ...     if terminated or truncated:
+    ...         break
+    >>> info["is_success"]
+    True
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        seed: int | None = None,
+        lookahead: float = 0.004,
+        approach: float = 0.012,
+    ) -> None:
+        unwrapped = env.unwrapped
+        if not isinstance(unwrapped, DVRKLineCuttingEnv):
+            raise ValueError(
+                "LineCuttingSupervisor controls a DVRKLineCuttingEnv, "
+                f"got {type(unwrapped).__name__}"
+            )
+        self.env = unwrapped
+        self.lookahead = lookahead
+        self.approach = approach
+        self.rng = np.random.default_rng(seed)
+        self._stage = 0
+
+    @property
+    def phase(self) -> int:
+        """0 while moving to the line's start, 1 while following the line."""
+        return POSITION if self._stage < 2 else FOLLOW
+
+    def reset(self, obs: np.ndarray) -> None:
+        self._stage = 0
+
+    def act(self, obs: np.ndarray) -> int:
+        env = self.env
+        here = env.commanded_position[:2]
+        line = env.line
+        # the arm trails its commands by a few mm: line up behind the start (stage 0), then
+        # move in along the line's direction (stage 1) so that the tool meets it at its start
+        if self._stage == 0:
+            tangent = (line[1] - line[0]) / np.linalg.norm(line[1] - line[0])
+            action = self._step_towards(line[0] - self.approach * tangent - here, explore=True)
+            if action is not None:
+                return action
+            self._stage = 1
+        if self._stage == 1:
+            action = self._step_towards(line[0] - here, explore=False)
+            if action is not None:
+                return action
+            self._stage = 2
+        _, s = env.line_distance(here)
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
+        target = np.array([np.interp(s + self.lookahead, arc, line[:, k]) for k in range(2)])
+        action = self._step_towards(target - here, explore=False)
+        return PLUS_X if action is None else action
+
+    def _step_towards(self, error: np.ndarray, explore: bool) -> int | None:
+        """A step that brings the commanded position closer to ``error`` away (the one that
+        gains most, or with ``explore`` sometimes another useful one); None if none does."""
+        gains = _DIRECTIONS @ error
+        useful = np.flatnonzero(2.0 * gains > self.env.step_size)
+        if len(useful) == 0:
+            return None
+        if explore and len(useful) > 1 and self.rng.random() < 0.3:
+            return int(self.rng.choice(useful))
+        return int(np.argmax(gains))
