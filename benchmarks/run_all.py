@@ -18,6 +18,7 @@ FAST = [
     "bench_fit.py",
     "bench_demo_checks.py",
     "bench_segmentation.py",
+    "bench_dvrk.py",
 ]
 SLOW = ["sample_efficiency.py", "swirl_dqn_stability.py"]
 
