@@ -118,7 +118,8 @@ def test_leaving_the_line_fails_the_cut(env):
     [
         ({"radius": -2.0}, "radius"),
         ({"radius": float("nan")}, "radius"),
-        ({"robot": "Baxter9000"}, "unknown robot 'Baxter9000'"),
+        ({"robot": "Baxter9000"}, "unsupported robot 'Baxter9000'"),
+        ({"robot": "Sawyer"}, r"unsupported robot 'Sawyer'; supported: \['Panda'\]"),
         ({"line_start": (1.0, 2.0, 3.0)}, "line_start"),
         ({"line_jitter": -1.0}, "line_jitter"),
         ({"render_mode": "human"}, "render_mode"),

@@ -129,7 +129,7 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
         Each reset moves the line by up to this many cm along y (training lines "at random
         positions"); 0 keeps it fixed.
     robot : str, default "Panda"
-        A single-arm robosuite robot.
+        The robosuite arm (only the Panda is supported so far).
     render_mode : {"rgb_array"}, optional
 
     Examples
