@@ -64,6 +64,15 @@ def test_observation_is_position_and_line_distance_in_cm(env):
     np.testing.assert_allclose(obs, np.array([*xy, d]) * 100, rtol=1e-5, atol=1e-5)
 
 
+def test_point_along_walks_the_line(env):
+    env.reset(seed=0)
+    line = env.line
+    np.testing.assert_allclose(env.point_along(0.0), line[0])
+    np.testing.assert_allclose(env.point_along(1.0), line[-1])  # clipped to the end
+    d, s = env.line_distance(env.point_along(0.02))
+    assert d < 1e-6 and s == pytest.approx(0.02, abs=1e-6)
+
+
 def test_line_geometry_on_known_points():
     straight = line_points(None, 0.05)
     assert distance_to_polyline(np.array([0.02, 0.01]), straight) == pytest.approx((0.01, 0.02))

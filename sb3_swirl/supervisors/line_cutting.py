@@ -93,8 +93,7 @@ class LineCuttingSupervisor:
                 return action
             self._stage = 2
         _, s = env.line_distance(here)
-        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
-        target = np.array([np.interp(s + self.lookahead, arc, line[:, k]) for k in range(2)])
+        target = env.point_along(s + self.lookahead)
         action = self._step_towards(target - here, explore=False)
         return PLUS_X if action is None else action
 

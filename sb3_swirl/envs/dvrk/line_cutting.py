@@ -169,6 +169,11 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
         self.line_jitter = line_jitter / 100.0
         self._shape = line_points(None if radius is None else radius / 100.0, self.line_length)
         self._line = self._shape + self.line_start
+        # arc length at each point of the line (a shift by the jitter keeps it)
+        self._arc = np.concatenate(
+            [[0.0], np.cumsum(np.linalg.norm(np.diff(self._shape, axis=0), axis=1))]
+        )
+        self._nearest = (float("nan"), float("nan"))
         z = TABLE_TOP + self.tool_height
         super().__init__(
             robot=robot,
@@ -205,6 +210,10 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
         point (m, 0 at the line's start)."""
         return distance_to_polyline(np.asarray(xy, dtype=np.float64), self._line)
 
+    def point_along(self, s: float) -> np.ndarray:
+        """The world point (2,) of the line at arc length ``s`` (m), clipped to its ends."""
+        return np.array([np.interp(s, self._arc, self._line[:, k]) for k in range(2)])
+
     def _after_reset(self) -> np.ndarray:
         rng = self.np_random
         offset = np.array([0.0, rng.uniform(-self.line_jitter, self.line_jitter)])
@@ -223,11 +232,11 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
 
     def _observe(self) -> np.ndarray:
         xy = self.tool_position[:2]
-        d, _ = self.line_distance(xy)
-        return (np.array([*xy, d]) * 100.0).astype(np.float32)
+        self._nearest = self.line_distance(xy)  # read again by _evaluate
+        return (np.array([*xy, self._nearest[0]]) * 100.0).astype(np.float32)
 
     def _evaluate(self) -> tuple[float, bool, dict[str, Any]]:
-        d, s = self.line_distance(self.tool_position[:2])
+        d, s = self._nearest
         if not self._cutting and d <= self.on_line:
             self._cutting = True
             self._position_error = float(np.linalg.norm(self.tool_position[:2] - self._line[0]))
