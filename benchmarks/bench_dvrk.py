@@ -4,6 +4,9 @@ Targets (random actions, single process, resets included; issue 19):
 
 - ``DVRKLineCutting-v0`` steps/s >= 0.5x robosuite ``Lift`` (Panda, its default controller,
   20 Hz, no cameras);
+- ``DVRKTensioning-v0`` steps/s >= 0.25x ``Lift``, driven by its supervisor (reach, grasp,
+  lift, pull: the cloth is under load most of the time, the slow case) rather than by random
+  actions (which rarely grasp);
 - ``SubprocVecEnv`` with 2 workers >= 1.6x the steps/s of one env in ``DummyVecEnv``.
 
 Lift and our env alternate, repeat after repeat, and the medians are compared. Our env runs at
@@ -24,7 +27,28 @@ from _timing import side_by_side, stepper, vector_stepper
 
 import sb3_swirl.envs  # noqa: F401
 
-TARGETS = {"line cutting / Lift": 0.5, "2 workers / 1": 1.6}
+TARGETS = {"line cutting / Lift": 0.5, "tensioning / Lift": 0.25, "2 workers / 1": 1.6}
+
+
+def supervised_stepper(env_id: str, steps: int, seed: int):
+    """A function that takes ``steps`` steps of the env's supervisor; returns seconds."""
+    from sb3_swirl.supervisors import supervisor_for
+
+    env = gym.make(env_id)
+    supervisor = supervisor_for(env_id)(env.unwrapped, seed=seed)
+
+    def run() -> float:
+        start = time.perf_counter()
+        obs, _ = env.reset(seed=seed)
+        supervisor.reset(obs)
+        for _ in range(steps):
+            obs, _, terminated, truncated, _ = env.step(supervisor.act(obs))
+            if terminated or truncated:
+                obs, _ = env.reset()
+                supervisor.reset(obs)
+        return time.perf_counter() - start
+
+    return run
 
 
 def lift_stepper(steps: int, seed: int):
@@ -74,6 +98,13 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     ours_t, lift_t = side_by_side(stepper(ours, steps, 0), lift_stepper(steps, 0), repeats)
     print(f"line cutting {steps / ours_t:7.0f} steps/s   Lift {steps / lift_t:7.0f} steps/s")
     results["line cutting / Lift"] = lift_t / ours_t
+    ours_t, lift_t = side_by_side(
+        supervised_stepper("sb3_swirl/DVRKTensioning-v0", steps, 0),
+        lift_stepper(steps, 0),
+        repeats,
+    )
+    print(f"tensioning   {steps / ours_t:7.0f} steps/s   Lift {steps / lift_t:7.0f} steps/s")
+    results["tensioning / Lift"] = lift_t / ours_t
 
     one = make_vec_env("sb3_swirl/DVRKLineCutting-v0", n_envs=1, vec_env_cls=DummyVecEnv)
     two = make_vec_env("sb3_swirl/DVRKLineCutting-v0", n_envs=2, vec_env_cls=SubprocVecEnv)

@@ -21,11 +21,22 @@ from sb3_swirl.demos import (
     to_minari,
 )
 from sb3_swirl.dqn import SwirlDQN
-from sb3_swirl.envs import DVRKLineCuttingEnv, NoisyAcrobotEnv, ParallelParkingEnv
+from sb3_swirl.envs import (
+    DVRKLineCuttingEnv,
+    DVRKTensioningEnv,
+    NoisyAcrobotEnv,
+    ParallelParkingEnv,
+)
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.fitting import fit_task
 from sb3_swirl.inverse_dynamics import InverseDynamics
-from sb3_swirl.plotting import plot_cut_paths, plot_rewards, plot_segments, plot_transitions
+from sb3_swirl.plotting import (
+    plot_cut_paths,
+    plot_rewards,
+    plot_segments,
+    plot_sheet,
+    plot_transitions,
+)
 from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
 from sb3_swirl.segmentation import (
     SegmentationWarning,
@@ -39,6 +50,7 @@ from swirl_wrappers import RewardConfig, SwirlVectorWrapper, SwirlWrapper, TaskM
 
 __all__ = [
     "DVRKLineCuttingEnv",
+    "DVRKTensioningEnv",
     "DemoWarning",
     "Demonstration",
     "InverseDynamics",
@@ -68,6 +80,7 @@ __all__ = [
     "plot_cut_paths",
     "plot_rewards",
     "plot_segments",
+    "plot_sheet",
     "plot_transitions",
     "ruptures_indicator",
     "save_demos",

@@ -13,6 +13,8 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from sb3_swirl.experiments import PRESETS
+
 console = Console(stderr=True)
 
 
@@ -245,7 +247,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_show)
 
     p = sub.add_parser("demo", help="the main job: SWIRL vs DQN on a shipped task")
-    p.add_argument("task", choices=["parking", "acrobot", "linecutting"])
+    p.add_argument("task", choices=sorted(PRESETS))
     p.add_argument("--seed", type=_seed, default=0)
     p.add_argument("--n-demos", type=int, default=None)
     p.add_argument("--timesteps", type=int, default=None, help="training steps per method")

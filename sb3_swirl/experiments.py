@@ -84,6 +84,15 @@ PRESETS: dict[str, Preset] = {
         0.95,
         demo_env_kwargs={"line_jitter": 1.0},
     ),
+    # The paper's §10.1: 15 demos, then 100 rollouts of 100 steps.
+    "tensioning": Preset(
+        "sb3_swirl/DVRKTensioning-v0",
+        15,
+        10_000,
+        2_000,
+        5,
+        0.95,
+    ),
 }
 
 _ZOO_ONLY_KEYS = {"n_timesteps", "policy", "env_wrapper", "normalize", "frame_stack", "callback"}
@@ -222,23 +231,29 @@ def write_results(results: dict[str, Any], path: str | Path) -> None:
 
 
 def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path) -> None:
-    """Success rate against training episodes, one line per method (the paper's Fig. 2)."""
+    """Success rate and true return against training episodes, one line per method (the
+    paper's Fig. 2; the return is what Table 1 reports for tensioning)."""
     from sb3_swirl.plotting import _finish, _new_figure
 
-    fig = _new_figure((6, 4))
-    ax = fig.add_subplot()
+    fig = _new_figure((11, 4))
+    success_ax, return_ax = fig.subplots(1, 2)
     labels = {"swirl_dqn": "SWIRL (SwirlDQN)", "dqn": "DQN"}
     for run in runs:
         episodes = [p["episodes"] for p in run["curve"]]
-        success = [p["success_rate"] for p in run["curve"]]
-        ax.plot(episodes, success, marker="o", markersize=3, label=labels[run["algo"]])
-    ax.axhline(preset.target_success, color="grey", linestyle="--", linewidth=1, label="target")
-    ax.set_xlabel("training episodes (rollouts)")
-    ax.set_ylabel(f"true success rate ({preset.n_eval_episodes} eval episodes)")
-    ax.set_ylim(-0.02, 1.02)
-    ax.set_title(f"{preset.env_id}: {preset.n_demos} demos")
-    ax.legend(loc="lower right")
-    ax.grid(alpha=0.3)
+        for ax, key in ((success_ax, "success_rate"), (return_ax, "task_return")):
+            values = [p[key] for p in run["curve"]]
+            ax.plot(episodes, values, marker="o", markersize=3, label=labels[run["algo"]])
+    success_ax.axhline(
+        preset.target_success, color="grey", linestyle="--", linewidth=1, label="target"
+    )
+    success_ax.set_ylabel(f"true success rate ({preset.n_eval_episodes} eval episodes)")
+    success_ax.set_ylim(-0.02, 1.02)
+    return_ax.set_ylabel("true return (mean over eval episodes)")
+    for ax in (success_ax, return_ax):
+        ax.set_xlabel("training episodes (rollouts)")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="lower right")
+    fig.suptitle(f"{preset.env_id}: {preset.n_demos} demos")
     _finish(fig, path)
 
 
@@ -255,7 +270,7 @@ def run_demo(
 
     Parameters
     ----------
-    name : {"parking", "acrobot", "linecutting"}
+    name : {"parking", "acrobot", "linecutting", "tensioning"}
     seed : int
         Seeds the demos, the SWIRL fit, both learners and the evaluation envs.
     n_demos, total_timesteps : int, optional
@@ -318,6 +333,11 @@ def run_demo(
 
         plot_cut_paths(*models[0], path=out / "cut_paths.png", seed=seed)
         pictures.append("cut_paths.png")
+    elif preset.env_id == "sb3_swirl/DVRKTensioning-v0":
+        from sb3_swirl.plotting import plot_sheet
+
+        plot_sheet(*models[0], path=out / "sheet.png", seed=seed)
+        pictures.append("sheet.png")
     swirl, dqn = runs
     ratio = None
     if swirl["rollouts_to_target"] is not None and dqn["rollouts_to_target"]:

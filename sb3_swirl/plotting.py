@@ -335,3 +335,60 @@ def plot_cut_paths(
     ax.legend(loc="best", fontsize=8)
     ax.grid(alpha=0.3)
     return _finish(fig, path)
+
+
+def plot_sheet(
+    model: Any,
+    env: Any,
+    *,
+    seed: int = 0,
+    path: str | os.PathLike | None = None,
+) -> Figure:
+    """One greedy episode of a policy on the gauze (tensioning): the sheet and its signals.
+
+    Left, the sheet seen from the side (x, z) at the start and at the end of the episode, with
+    the tool's path; right, the disparity, the wrist load and the tool height over the episode
+    (the signals of the paper's Fig. 11). ``env`` is a (possibly wrapped)
+    :class:`~sb3_swirl.envs.dvrk.DVRKTensioningEnv`, reset with ``seed``.
+    """
+    from sb3_swirl.envs.dvrk._robosuite import TABLE_TOP
+    from sb3_swirl.envs.dvrk.tensioning import GRID
+
+    base = env.unwrapped
+    obs, _ = env.reset(seed=seed)
+    start = base.vertices
+    signals = [np.asarray(obs[:6], dtype=float)]
+    while True:
+        action, _ = model.predict(obs, deterministic=True)
+        obs, _, terminated, truncated, info = env.step(int(action))
+        signals.append(np.asarray(obs[:6], dtype=float))
+        if terminated or truncated:
+            break
+    signals = np.array(signals)
+    fig = _new_figure((11, 4))
+    side, over_time = fig.subplots(1, 2)
+    for vertices, color, label in ((start, "0.6", "start"), (base.vertices, "C0", "end")):
+        grid = ((vertices - [0.0, 0.0, TABLE_TOP]) * 100.0).reshape(GRID, GRID, 3)
+        for j in range(GRID):  # each column of the grid, from the free edge to the pins
+            side.plot(grid[:, j, 0], grid[:, j, 2], color=color, linewidth=1, alpha=0.8)
+        side.plot([], [], color=color, label=f"sheet at the {label}")
+    side.plot(signals[:, 0], signals[:, 2], "k:", linewidth=1, label="tool path")
+    side.axhline(0.0, color="saddlebrown", linewidth=2, label="table")
+    side.set_aspect("equal")
+    side.set_xlabel("x (cm)")
+    side.set_ylabel("height above the table (cm)")
+    outcome = "flat" if info.get("is_success") else "not flat"
+    side.set_title(f"gauze from the side: {outcome}, disparity {info['disparity_cm2']:.3f} cm²")
+    side.legend(loc="upper left", fontsize=8)
+    steps = np.arange(len(signals))
+    over_time.plot(steps, signals[:, 5], label="disparity (cm²)")
+    over_time.plot(steps, signals[:, 4], label="wrist load (N)")
+    over_time.plot(steps, signals[:, 2], label="tool height (cm)")
+    over_time.plot(steps, signals[:, 3], label="gripper closed")
+    over_time.set_yscale("symlog", linthresh=0.1)
+    over_time.set_xlabel("step")
+    over_time.set_title("signals over the episode (greedy policy)")
+    over_time.legend(loc="best", fontsize=8)
+    for ax in (side, over_time):
+        ax.grid(alpha=0.3)
+    return _finish(fig, path)

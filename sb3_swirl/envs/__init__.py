@@ -7,7 +7,7 @@ registered here all the same, and robosuite is imported only when one is made.
 from gymnasium.envs.registration import register
 
 from sb3_swirl.envs.acrobot import NoisyAcrobotEnv
-from sb3_swirl.envs.dvrk import DVRKLineCuttingEnv
+from sb3_swirl.envs.dvrk import DVRKLineCuttingEnv, DVRKTensioningEnv
 from sb3_swirl.envs.parking import ParallelParkingEnv
 
 register(
@@ -38,5 +38,10 @@ register(
     entry_point="sb3_swirl.envs.dvrk.line_cutting:DVRKLineCuttingEnv",
     max_episode_steps=150,
 )
+register(
+    id="sb3_swirl/DVRKTensioning-v0",
+    entry_point="sb3_swirl.envs.dvrk.tensioning:DVRKTensioningEnv",
+    max_episode_steps=100,
+)
 
-__all__ = ["DVRKLineCuttingEnv", "NoisyAcrobotEnv", "ParallelParkingEnv"]
+__all__ = ["DVRKLineCuttingEnv", "DVRKTensioningEnv", "NoisyAcrobotEnv", "ParallelParkingEnv"]

@@ -25,6 +25,7 @@ import sb3_swirl.envs  # noqa: F401  (registers the sb3_swirl/ env ids)
 from sb3_swirl.demos import Demonstration
 from sb3_swirl.supervisors.acrobot import AcrobotSupervisor
 from sb3_swirl.supervisors.line_cutting import LineCuttingSupervisor
+from sb3_swirl.supervisors.tensioning import TensioningSupervisor
 from swirl_wrappers._validation import check_int
 
 #: env id -> ``"module:Class"`` of its supervisor, imported on first use
@@ -33,7 +34,8 @@ SUPERVISORS: dict[str, str] = {
     "sb3_swirl/ParallelParkingPartial-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
     "sb3_swirl/ParallelParkingPerturbed-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
     "sb3_swirl/NoisyAcrobot-v0": "sb3_swirl.supervisors.acrobot:AcrobotSupervisor",
-    "sb3_swirl/DVRKLineCutting-v0": ("sb3_swirl.supervisors.line_cutting:LineCuttingSupervisor"),
+    "sb3_swirl/DVRKLineCutting-v0": "sb3_swirl.supervisors.line_cutting:LineCuttingSupervisor",
+    "sb3_swirl/DVRKTensioning-v0": "sb3_swirl.supervisors.tensioning:TensioningSupervisor",
 }
 
 
@@ -213,6 +215,7 @@ __all__ = [
     "AcrobotSupervisor",
     "LineCuttingSupervisor",
     "Supervisor",
+    "TensioningSupervisor",
     "collect_demos",
     "supervisor_for",
 ]

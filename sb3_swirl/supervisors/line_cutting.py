@@ -6,6 +6,7 @@ import gymnasium as gym
 import numpy as np
 
 from sb3_swirl.envs.dvrk.line_cutting import _DIRECTIONS, PLUS_X, DVRKLineCuttingEnv
+from sb3_swirl.supervisors._keyboard import step_towards
 
 #: The supervisor's phases: move to the line's start, then follow the line.
 POSITION, FOLLOW = range(2)
@@ -98,12 +99,5 @@ class LineCuttingSupervisor:
         return PLUS_X if action is None else action
 
     def _step_towards(self, error: np.ndarray, explore: bool) -> int | None:
-        """A step that brings the commanded position closer to ``error`` away (the one that
-        gains most, or with ``explore`` sometimes another useful one); None if none does."""
-        gains = _DIRECTIONS @ error
-        useful = np.flatnonzero(2.0 * gains > self.env.step_size)
-        if len(useful) == 0:
-            return None
-        if explore and len(useful) > 1 and self.rng.random() < 0.3:
-            return int(self.rng.choice(useful))
-        return int(np.argmax(gains))
+        rng = self.rng if explore else None
+        return step_towards(_DIRECTIONS, error, self.env.step_size, rng)

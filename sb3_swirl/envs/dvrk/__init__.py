@@ -6,5 +6,6 @@ classes do when they are built.
 
 from sb3_swirl.envs.dvrk._robosuite import ROBOTS
 from sb3_swirl.envs.dvrk.line_cutting import DVRKLineCuttingEnv
+from sb3_swirl.envs.dvrk.tensioning import DVRKTensioningEnv
 
-__all__ = ["ROBOTS", "DVRKLineCuttingEnv"]
+__all__ = ["ROBOTS", "DVRKLineCuttingEnv", "DVRKTensioningEnv"]

@@ -33,6 +33,25 @@ TABLE_TOP = 0.8
 _ROBOSUITE_TASKS: dict[str, type] = {}
 
 
+def look_at_camera(name: str, position: np.ndarray, target: np.ndarray) -> Any:
+    """An MJCF ``<camera>`` element at ``position`` looking at ``target`` (world frame, m),
+    with the world's z axis up in the picture."""
+    import xml.etree.ElementTree as ET
+
+    forward = np.asarray(target, dtype=float) - np.asarray(position, dtype=float)
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    return ET.Element(
+        "camera",
+        name=name,
+        pos=" ".join(f"{v:.4f}" for v in position),
+        xyaxes=" ".join(f"{v:.4f}" for v in (*right, *up)),
+        fovy="45",
+    )
+
+
 def robosuite_task(name: str, build: Any) -> type:
     """The robosuite ``ManipulationEnv`` subclass ``name``, built once by ``build(base)``.
 
@@ -98,8 +117,8 @@ class RobosuiteStepEnv(gym.Env):
     kp = 300
     #: control steps of settling after the tool is placed at its start (not part of the episode)
     settle_steps = 10
-    #: camera for ``render()`` and its picture size
-    camera = "frontview"
+    #: camera for ``render()`` (each task adds it with :func:`look_at_camera`) and picture size
+    camera = "dvrk_view"
     render_size = (480, 480)
 
     def __init__(

@@ -1,0 +1,158 @@
+"""The dVRK gauze-tensioning task on robosuite: env contract, sheet, grasp, supervisor."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import sb3_swirl.envs  # noqa: F401
+from sb3_swirl.envs.dvrk import DVRKTensioningEnv
+from sb3_swirl.envs.dvrk.tensioning import CLOSE, MARKERS, MINUS_Z, OPEN, PLUS_Z
+from sb3_swirl.supervisors import collect_demos
+from sb3_swirl.supervisors.tensioning import GRASP, LIFT, REACH, TENSION, TensioningSupervisor
+
+ENV_ID = "sb3_swirl/DVRKTensioning-v0"
+
+
+@pytest.fixture(scope="module")
+def env() -> DVRKTensioningEnv:
+    env = DVRKTensioningEnv()
+    yield env
+    env.close()
+
+
+def test_env_checkers(env):
+    check_env(env, skip_render_check=True)
+    sb3_check_env(env, warn=True)
+
+
+def test_same_seed_same_trajectory(env):
+    def run(seed):
+        obs = [env.reset(seed=seed)[0]]
+        for action in [MINUS_Z, MINUS_Z, 0, CLOSE, PLUS_Z, OPEN]:
+            obs.append(env.step(action)[0])
+        return np.array(obs)
+
+    first = run(3)
+    np.testing.assert_array_equal(first, run(3))
+    assert not np.array_equal(first, run(4))
+
+
+def test_observation_layout(env):
+    obs, _ = env.reset(seed=1)
+    tool = env.tool_position - [0.0, 0.0, 0.8]
+    np.testing.assert_allclose(obs[:3], tool * 100, rtol=1e-5, atol=1e-4)
+    assert obs[3] == 0.0  # open
+    heights = env.vertices[list(MARKERS), 2] * 100
+    assert obs[5] == pytest.approx(np.var(heights), rel=1e-5)
+    assert obs[4] < 0.5  # nothing held: the tared wrist load is near zero
+
+
+def test_the_sheet_rests_in_its_drape(env):
+    """Every reset starts from the same drape and the sheet stays there untouched."""
+    first, _ = env.reset(seed=0)
+    start = env.vertices
+    assert first[5] > 0.5  # not flat: it hangs from the pins and lies on the table
+    for _ in range(20):
+        obs, reward, terminated, _, _ = env.step(OPEN)
+    assert not terminated and reward == pytest.approx(-obs[5])
+    assert np.abs(env.vertices - start).max() < 0.005
+    env.reset(seed=5)  # another start of the tool, the same sheet (the arm's motion to its
+    # start shares the solver with the cloth: millimetre differences)
+    np.testing.assert_allclose(env.vertices, start, atol=0.002)
+
+
+def test_closing_away_from_the_edge_grasps_nothing(env):
+    env.reset(seed=0)  # the tool starts 3-5 cm above the table
+    _, _, _, _, info = env.step(CLOSE)
+    assert info["grasped"] == 0 and len(env.held_vertices) == 0
+
+
+def test_pulling_the_grasped_edge_flattens_the_sheet(env):
+    """The supervisor's grasp, lift and pull: the disparity falls, the wrist load rises."""
+    sup = TensioningSupervisor(env, seed=0)
+    obs, _ = env.reset(seed=0)
+    sup.reset(obs)
+    start = obs.copy()
+    phases = []
+    for _ in range(100):
+        obs, _, _, _, info = env.step(sup.act(obs))
+        phases.append(sup.phase)
+        if sup.phase == LIFT and info["grasped"]:
+            lifted = obs.copy()
+    assert phases[0] == REACH and phases[-1] == TENSION
+    assert np.all(np.diff(phases) >= 0) and GRASP in phases
+    assert info["grasped"] >= 1 and obs[3] == 1.0
+    assert obs[5] < 0.1 * start[5]  # flat: disparity down by more than 10x
+    assert obs[5] < lifted[5]  # pulling flattens beyond lifting
+    assert obs[4] > start[4] + 2.0  # the wrist feels the tension (N)
+    assert info["is_success"]
+    # letting go: the sheet falls back and the disparity rises again
+    for _ in range(15):
+        obs, _, _, _, info = env.step(OPEN)
+    assert info["grasped"] == 0 and not info["is_success"]
+    assert obs[5] > 0.1
+
+
+@pytest.fixture(scope="module")
+def demos():
+    return collect_demos(ENV_ID, 6, seed=1, return_phases=True)
+
+
+def test_supervisor_demos_succeed_with_phases(demos):
+    for demo, phase in zip(*demos, strict=True):
+        assert len(demo.actions) == 100
+        assert set(np.unique(phase)) == {REACH, GRASP, LIFT, TENSION}
+        assert demo.observations[-1, 5] < 0.05
+    # same seed, same demos
+    again = collect_demos(ENV_ID, 1, seed=1)
+    np.testing.assert_array_equal(again[0].observations, demos[0][0].observations)
+
+
+def test_swirl_finds_the_phases_and_clones_the_grasp(demos):
+    """6 demos -> regions at the grasp, the lifted sheet and the flat sheet -> SwirlDQN's
+    demonstration start (before any exploration) grasps the edge and lifts it: the sheet ends
+    less than half as slack as it started."""
+    from sb3_swirl.dqn import SwirlDQN
+    from sb3_swirl.experiments import _algo_kwargs, _swirl_wrapper_kwargs, load_hyperparams
+    from sb3_swirl.fitting import fit_task
+    from swirl_wrappers import SwirlWrapper
+
+    demos, _ = demos
+    task = fit_task(demos, random_state=0)
+    regions = np.array([region.mean for region in task.regions])
+    grasped, lifted, flat = regions[-3:]
+    assert grasped[3] > 0.9 and grasped[2] < 1.5  # gripper closed, tool down at the edge
+    assert lifted[2] > 4.0 and lifted[5] < 0.5 * regions[0][5]  # up: the sheet less slack
+    assert flat[5] < 0.05 and flat[4] > 3.0  # pulled flat, under load
+    hyperparams = load_hyperparams("swirl_dqn", ENV_ID)
+    env = SwirlWrapper(gym.make(ENV_ID), task, **_swirl_wrapper_kwargs(hyperparams))
+    model = SwirlDQN("MlpPolicy", env, demonstrations=demos, seed=0, **_algo_kwargs(hyperparams))
+    model.learn(total_timesteps=1)
+    for seed in (100, 101):
+        obs, _ = env.reset(seed=seed)
+        start = obs[5]
+        for _ in range(100):
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, _, _, info = env.step(int(action))
+        assert info["grasped"] > 0 and info["disparity_cm2"] < 0.5 * start, info
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"robot": "Baxter9000"}, "unsupported robot 'Baxter9000'"),
+        ({"render_mode": "human"}, "render_mode"),
+    ],
+)
+def test_bad_constructor_values(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        DVRKTensioningEnv(**kwargs)
+
+
+def test_supervisor_needs_the_tensioning_env():
+    with pytest.raises(ValueError, match="DVRKTensioningEnv"):
+        TensioningSupervisor(gym.make("CartPole-v1"))
