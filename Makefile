@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo demo-acrobot demo-linecutting test test-slow bench lint format clean
+.PHONY: install demo demo-acrobot demo-linecutting demo-tensioning table1 test test-slow bench lint format clean
 
 install: $(STAMP)
 
@@ -26,6 +26,12 @@ demo-acrobot: install
 
 demo-linecutting: install
 	$(BIN)/sb3-swirl demo linecutting
+
+demo-tensioning: install
+	$(BIN)/sb3-swirl demo tensioning
+
+table1: install
+	$(BIN)/sb3-swirl reproduce table1
 
 test: install
 	$(BIN)/ruff check . && $(BIN)/ruff format --check .

@@ -8,6 +8,7 @@ Importing the package registers the ``sb3_swirl/`` gymnasium environments.
 """
 
 from sb3_swirl import envs  # noqa: F401  (registers the sb3_swirl/ gymnasium envs)
+from sb3_swirl.baselines import BCPolicy
 from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
 from sb3_swirl.datasets import make_switching_demos
 from sb3_swirl.demos import (
@@ -49,6 +50,7 @@ from sb3_swirl.vec_env import SwirlVecEnv, get_swirl_attr, make_swirl_env
 from swirl_wrappers import RewardConfig, SwirlVectorWrapper, SwirlWrapper, TaskModel
 
 __all__ = [
+    "BCPolicy",
     "DVRKLineCuttingEnv",
     "DVRKTensioningEnv",
     "DemoWarning",

@@ -189,6 +189,16 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    from sb3_swirl.experiments import REPRODUCTIONS
+
+    _writable_folder(Path(args.out))
+    REPRODUCTIONS[args.name](
+        quick=args.quick, seeds=args.seeds, out_dir=args.out, progress=not args.quiet
+    )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="sb3-swirl",
@@ -254,6 +264,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="results", help="output folder (default results/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("reproduce", help="reproduce a table or figure of the paper")
+    p.add_argument("name", choices=["table1", "table2"])
+    p.add_argument("--quick", action="store_true", help="one seed, small budgets (minutes)")
+    p.add_argument("--seeds", type=_seed, nargs="+", default=None, help="override the seeds")
+    p.add_argument("--out", default="results", help="output folder (default results/)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_reproduce)
     return parser
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
@@ -39,6 +39,8 @@ class Preset:
     fit_kwargs: dict[str, Any] = field(default_factory=dict)
     #: ``gym.make`` arguments of the env the supervisor demonstrates on
     demo_env_kwargs: dict[str, Any] = field(default_factory=dict)
+    #: the two observation axes ``segments.png`` draws
+    plot_dims: tuple[int, int] = (0, 1)
 
 
 PRESETS: dict[str, Preset] = {
@@ -84,7 +86,8 @@ PRESETS: dict[str, Preset] = {
         0.95,
         demo_env_kwargs={"line_jitter": 1.0},
     ),
-    # The paper's §10.1: 15 demos, then 100 rollouts of 100 steps.
+    # The paper's §10.1: 15 demos, then 100 rollouts of 100 steps; the segments seen from the
+    # side (x, height): reach down, lift, pull.
     "tensioning": Preset(
         "sb3_swirl/DVRKTensioning-v0",
         15,
@@ -92,6 +95,7 @@ PRESETS: dict[str, Preset] = {
         2_000,
         5,
         0.95,
+        plot_dims=(0, 2),
     ),
 }
 
@@ -152,10 +156,14 @@ def train_and_evaluate(
     progress: bool = True,
     hyperparams: dict[str, Any] | None = None,
     keep_model: bool = False,
+    env_kwargs: dict[str, Any] | None = None,
+    max_episodes: int | None = None,
 ) -> dict[str, Any]:
     """Train ``algo`` ("swirl_dqn" or "dqn") and evaluate true success along the way.
 
     ``hyperparams`` (rl-zoo format) default to ``zoo_configs/{algo}.yml``'s for the env.
+    ``env_kwargs`` go to ``gym.make`` for the training and evaluation envs; ``max_episodes``
+    stops training after that many training episodes (or ``total_timesteps``, if sooner).
     Returns the learning curve (timesteps, training episodes, success rate, true return at each
     evaluation), the final success rate and the wall time; with ``keep_model``, also the trained
     model and its evaluation env under ``"model"`` and ``"eval_env"`` (not JSON).
@@ -173,7 +181,7 @@ def train_and_evaluate(
     policy = hyperparams.get("policy", "MlpPolicy")
 
     def make(env_seed: int) -> gym.Env:
-        env = gym.make(preset.env_id)
+        env = gym.make(preset.env_id, **(env_kwargs or {}))
         if algo == "swirl_dqn":
             env = SwirlWrapper(env, task, **_swirl_wrapper_kwargs(hyperparams))
         env.reset(seed=env_seed)
@@ -191,8 +199,13 @@ def train_and_evaluate(
         deterministic=True,
         verbose=0,
     )
+    callbacks: list[Any] = [callback]
+    if max_episodes is not None:
+        from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+
+        callbacks.append(StopTrainingOnMaxEpisodes(check_int("max_episodes", max_episodes, low=1)))
     start = time.perf_counter()
-    model.learn(total_timesteps=total_timesteps, callback=callback, progress_bar=progress)
+    model.learn(total_timesteps=total_timesteps, callback=callbacks, progress_bar=progress)
     wall = time.perf_counter() - start
     if callback.evaluations_timesteps[-1:] != [model.num_timesteps]:
         callback.evaluate()  # the final policy, when the budget is not a multiple of eval_freq
@@ -257,6 +270,29 @@ def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path)
     _finish(fig, path)
 
 
+def _save_final_frame(
+    model: Any, preset: Preset, task: Any, hyperparams: dict[str, Any], seed: int, path: Path
+) -> bool:
+    """Save the last frame (``rgb_array``) of one greedy episode of a SWIRL ``model``; False,
+    with a note, where offscreen rendering is not available (it needs EGL)."""
+    from matplotlib.image import imsave
+
+    from swirl_wrappers import SwirlWrapper
+
+    try:
+        env = gym.make(preset.env_id, render_mode="rgb_array")
+        env = SwirlWrapper(env, task, **_swirl_wrapper_kwargs(hyperparams))
+        greedy_infos(model, env, seed)
+        picture = env.render()
+        env.close()
+    except Exception as exc:  # no OpenGL here: the picture is optional, the plots are not
+        console.print(f"no rendered picture ({type(exc).__name__}: {exc}); the plots are there")
+        return False
+    with atomic_write(path, "wb") as fh:
+        imsave(fh, picture, format="png")
+    return True
+
+
 def run_demo(
     name: str,
     *,
@@ -309,7 +345,7 @@ def run_demo(
     fit_time = time.perf_counter() - fit_start
     console.print(f"SWIRL found {task.n_segments} segments in {fit_time:.1f} s")
     task.to_json(out / "task.json")
-    plot_segments(demos, task, path=out / "segments.png")
+    plot_segments(demos, task, preset.plot_dims, path=out / "segments.png")
 
     runs = []
     for algo in ("swirl_dqn", "dqn"):
@@ -338,6 +374,10 @@ def run_demo(
 
         plot_sheet(*models[0], path=out / "sheet.png", seed=seed)
         pictures.append("sheet.png")
+    if preset.env_id.startswith("sb3_swirl/DVRK"):
+        frame = out / "final_frame.png"
+        if _save_final_frame(models[0][0], preset, task, runs[0]["hyperparams"], seed, frame):
+            pictures.append(frame.name)
     swirl, dqn = runs
     ratio = None
     if swirl["rollouts_to_target"] is not None and dqn["rollouts_to_target"]:
@@ -375,3 +415,355 @@ def run_demo(
         console.print(f"SWIRL needed {ratio:.2f}× DQN's rollouts")
     console.print(f"wrote {out}/results.json, learning_curve.png, {', '.join(pictures)}, task.json")
     return results
+
+
+#: Table 1 of the paper (gauze tensioning, 15 demos, 100 rollouts): the disparity value.
+PAPER_TABLE1 = {
+    "rl": -8210.0,
+    "bc": -7591.0,
+    "segmented_bc": -3516.0,
+    "swirl": -3110.0,
+    "swirl_no_bc": None,  # "success only in the first two segments", no value given
+}
+_TABLE1_LABELS = {
+    "rl": "pure exploration (DQN)",
+    "bc": "pure demonstration (BC)",
+    "segmented_bc": "segmented demonstrations (BC per segment)",
+    "swirl": "SWIRL (BC start + rollouts)",
+    "swirl_no_bc": "SWIRL without the BC start",
+}
+
+
+def greedy_infos(policy: Any, env: gym.Env, seed: int) -> list[dict[str, Any]]:
+    """The ``info`` of every step of one greedy episode of ``policy`` (anything with SB3's
+    ``predict``) in ``env``, reset with ``seed``."""
+    obs, _ = env.reset(seed=seed)
+    infos = []
+    while True:
+        action, _ = policy.predict(obs, deterministic=True)
+        obs, _, terminated, truncated, info = env.step(int(action))
+        infos.append(info)
+        if terminated or truncated:
+            return infos
+
+
+def _score_policy(policy: Any, env: gym.Env, seeds: list[int]) -> dict[str, float]:
+    """Greedy episodes of a tensioning policy: mean disparity value (minus the disparity summed
+    over the episode), success (flat at the end) and grasp rates."""
+    episodes = [greedy_infos(policy, env, seed) for seed in seeds]
+    return {
+        "value": float(np.mean([-sum(i["disparity_cm2"] for i in e) for e in episodes])),
+        "success_rate": float(np.mean([e[-1]["is_success"] for e in episodes])),
+        "grasp_rate": float(np.mean([any(i["grasped"] for i in e) for e in episodes])),
+    }
+
+
+def reproduce_table1(
+    *,
+    quick: bool = False,
+    seeds: list[int] | None = None,
+    out_dir: str | Path = "results",
+    progress: bool = True,
+) -> dict[str, Any]:
+    """The paper's Table 1 on ``DVRKTensioning-v0``: five methods, 15 demos, 100 rollouts.
+
+    Per seed: 15 supervisor demos; SWIRL's fit; a BC clone of the demos on the raw observation
+    (``bc``) and on the lifted one (``segmented_bc``, run in the SWIRL wrapper); DQN from
+    scratch (``rl``), SwirlDQN (``swirl``) and SwirlDQN without demos (``swirl_no_bc``) for the
+    same number of steps. Every method is scored on the same greedy evaluation episodes by the
+    disparity value (minus the disparity in cm² summed over the 100 steps; the paper's units
+    are not given, so only ratios compare). Writes ``out_dir/table1/results.json``.
+
+    Parameters
+    ----------
+    quick : bool
+        One seed, 20 rollouts, 3 evaluation episodes (minutes), instead of seeds 0-4, 100
+        rollouts and 10 evaluation episodes.
+    seeds : list of int, optional
+        Override the seeds.
+    """
+    from sb3_swirl.baselines import BCPolicy, lifted_demos
+    from sb3_swirl.fitting import fit_task
+    from sb3_swirl.supervisors import collect_demos
+    from swirl_wrappers import SwirlWrapper
+
+    base = PRESETS["tensioning"]
+    steps = 2_000 if quick else base.total_timesteps
+    n_eval = 3 if quick else 10
+    seeds = ([0] if quick else [0, 1, 2, 3, 4]) if seeds is None else seeds
+    for seed in seeds:
+        check_int("seed", seed, low=0)
+    # train_and_evaluate's own evaluation runs once, at the end, on one episode: every method
+    # is scored below on the same episodes
+    preset = replace(base, eval_freq=steps, n_eval_episodes=1)
+    out = Path(out_dir) / "table1"
+    out.mkdir(parents=True, exist_ok=True)
+    console.rule(f"[bold]Table 1: gauze tensioning, {len(seeds)} seed(s), {steps} steps")
+
+    runs: dict[str, list[dict[str, Any]]] = {name: [] for name in _TABLE1_LABELS}
+    segments = []
+    for seed in seeds:
+        eval_seeds = [20_000 + 100 * seed + i for i in range(n_eval)]
+        demos = collect_demos(base.env_id, base.n_demos, seed=seed, progress=progress)
+        task = fit_task(demos, random_state=seed, **base.fit_kwargs)
+        segments.append(task.n_segments)
+        env = gym.make(base.env_id)
+        lifted_env = SwirlWrapper(gym.make(base.env_id), task)
+        observations = np.concatenate([d.observations[:-1] for d in demos])
+        actions = np.concatenate([d.actions for d in demos])
+        clones = {
+            "bc": (BCPolicy(random_state=seed).fit(observations, actions), env),
+            "segmented_bc": (
+                BCPolicy(random_state=seed).fit(*lifted_demos(demos, task, env.observation_space)),
+                lifted_env,
+            ),
+        }
+        for name, (policy, score_env) in clones.items():
+            runs[name].append({"seed": seed} | _score_policy(policy, score_env, eval_seeds))
+        learners = {
+            "rl": ("dqn", None, None),
+            "swirl": ("swirl_dqn", demos, None),
+            "swirl_no_bc": (
+                "swirl_dqn",
+                None,
+                {"prefill_replay": False, "demo_loss_coef": 0.0, "exploration_initial_eps": 1.0},
+            ),
+        }
+        for name, (algo, algo_demos, overrides) in learners.items():
+            hyperparams = load_hyperparams(algo, base.env_id) | (overrides or {})
+            console.print(f"seed {seed}: training {name} for {steps} steps")
+            run = train_and_evaluate(
+                algo,
+                preset,
+                task=task,
+                demos=algo_demos,
+                total_timesteps=steps,
+                seed=seed,
+                progress=progress,
+                hyperparams=hyperparams,
+                keep_model=True,
+            )
+            scored = _score_policy(run["model"], run["eval_env"], eval_seeds)
+            runs[name].append({"seed": seed, "wall_time_s": run["wall_time_s"]} | scored)
+        env.close()
+        lifted_env.close()
+
+    summary = {}
+    for name, per_seed in runs.items():
+        values = [r["value"] for r in per_seed]
+        summary[name] = {
+            "value_mean": float(np.mean(values)),
+            "value_std": float(np.std(values)),
+            "success_rate": float(np.mean([r["success_rate"] for r in per_seed])),
+            "grasp_rate": float(np.mean([r["grasp_rate"] for r in per_seed])),
+            "paper_value": PAPER_TABLE1[name],
+        }
+    gain = 1.0 - summary["swirl"]["value_mean"] / summary["segmented_bc"]["value_mean"]
+    results = {
+        "experiment": "table1",
+        "env_id": base.env_id,
+        "settings": {
+            "n_demos": base.n_demos,
+            "total_timesteps": steps,
+            "n_eval_episodes": n_eval,
+            "seeds": seeds,
+            "quick": quick,
+        },
+        "n_segments": segments,
+        "runs": runs,
+        "summary": summary,
+        "swirl_gain_over_segmented_bc": gain,
+        "paper_swirl_gain_over_segmented_bc": 1.0 - (-3110.0 / -3516.0),
+    }
+    write_results(results, out / "results.json")
+
+    table = Table(title=f"Table 1, gauze tensioning ({len(seeds)} seed(s) × {n_eval} episodes)")
+    for column in ("method", "value (mean ± std over seeds)", "flat at the end", "grasped"):
+        table.add_column(column, justify="left" if column == "method" else "right")
+    table.add_column("paper", justify="right")
+    for name, row in summary.items():
+        paper = row["paper_value"]
+        table.add_row(
+            _TABLE1_LABELS[name],
+            f"{row['value_mean']:.1f} ± {row['value_std']:.1f}",
+            f"{row['success_rate']:.0%}",
+            f"{row['grasp_rate']:.0%}",
+            "—" if paper is None else f"{paper:.0f}",
+        )
+    Console().print(table)
+    console.print(
+        f"SWIRL's value is {gain:.1%} better than segmented BC's (paper: 11.5%); "
+        f"SWIRL found {segments} segments. Wrote {out}/results.json"
+    )
+    return results
+
+
+#: Table 2 of the paper (line cutting): radius (cm, None = straight) -> (SVM position error,
+#: SVM tracking error, SWIRL position error, SWIRL tracking error) in cm; None where the SVM
+#: failed.
+PAPER_TABLE2 = {
+    None: (0.46, 0.23, 0.42, 0.21),
+    4.0: (0.43, 0.59, 0.45, 0.33),
+    3.5: (0.51, 1.21, 0.56, 0.38),
+    3.0: (0.86, 3.03, 0.66, 0.57),
+    2.5: (1.43, None, 0.74, 0.87),
+    2.0: (None, None, 0.87, 1.45),
+    1.5: (None, None, 1.12, 2.44),
+}
+
+
+def _score_cuts(policy: Any, env: gym.Env, seeds: list[int]) -> dict[str, Any]:
+    """Greedy line-cutting episodes: how many began a cut and succeeded, and the mean position
+    and tracking errors (cm) of those that began one (None if none did)."""
+    position, tracking, successes = [], [], []
+    for seed in seeds:
+        info = greedy_infos(policy, env, seed)[-1]
+        successes.append(bool(info["is_success"]))
+        if info["cutting"]:
+            position.append(info["position_error_cm"])
+            tracking.append(info["tracking_error_cm"])
+    return {
+        "success_rate": float(np.mean(successes)),
+        "cut_rate": len(position) / len(seeds),
+        "position_error_cm": float(np.mean(position)) if position else None,
+        "tracking_error_cm": float(np.mean(tracking)) if tracking else None,
+    }
+
+
+def reproduce_table2(
+    *,
+    quick: bool = False,
+    seeds: list[int] | None = None,
+    out_dir: str | Path = "results",
+    progress: bool = True,
+) -> dict[str, Any]:
+    """The paper's Table 2 on ``DVRKLineCutting-v0``: SWIRL vs an SVM clone on curved lines.
+
+    Per seed: 5 supervisor demos on straight lines at random positions (``line_jitter=1``);
+    SWIRL's fit on them; an RBF-kernel SVM clone of them (the paper's SVM baseline); then for
+    every test line (straight, and arcs of radius 4.0 to 1.5 cm) SwirlDQN from the demos with
+    25 episodes of exploration on that line, and both policies scored on the same greedy
+    episodes: cut success (start within 1 cm of the line's start, never more than 1 cm off it),
+    position and tracking errors (cm, over the episodes that began a cut). Writes
+    ``out_dir/table2/results.json``.
+
+    Parameters
+    ----------
+    quick : bool
+        One seed, three lines (straight, r = 3.0 and 1.5 cm), 10 episodes of exploration and 5
+        evaluation episodes, instead of seeds 0-2, the seven lines, 25 and 15.
+    seeds : list of int, optional
+        Override the seeds.
+    """
+    from sb3_swirl.baselines import BCPolicy
+    from sb3_swirl.fitting import fit_task
+    from sb3_swirl.supervisors import collect_demos
+
+    preset = PRESETS["linecutting"]
+    radii = [None, 3.0, 1.5] if quick else list(PAPER_TABLE2)
+    episodes, n_eval = (10, 5) if quick else (25, 15)
+    seeds = ([0] if quick else [0, 1, 2]) if seeds is None else seeds
+    for seed in seeds:
+        check_int("seed", seed, low=0)
+    out = Path(out_dir) / "table2"
+    out.mkdir(parents=True, exist_ok=True)
+    console.rule(f"[bold]Table 2: line cutting, {len(seeds)} seed(s), {episodes} episodes")
+
+    runs: list[dict[str, Any]] = []
+    for seed in seeds:
+        demos = collect_demos(
+            preset.env_id, preset.n_demos, seed=seed, progress=progress, **preset.demo_env_kwargs
+        )
+        task = fit_task(demos, random_state=seed, **preset.fit_kwargs)
+        observations = np.concatenate([d.observations[:-1] for d in demos])
+        actions = np.concatenate([d.actions for d in demos])
+        svm = BCPolicy("svm", random_state=seed).fit(observations, actions)
+        eval_seeds = [30_000 + 100 * seed + i for i in range(n_eval)]
+        for radius in radii:
+            line = "straight" if radius is None else f"r = {radius} cm"
+            console.print(f"seed {seed}, {line}: SwirlDQN, {episodes} episodes of exploration")
+            env = gym.make(preset.env_id, radius=radius)
+            swirl = train_and_evaluate(
+                "swirl_dqn",
+                replace(preset, eval_freq=10**9, n_eval_episodes=1),
+                task=task,
+                demos=demos,
+                total_timesteps=150 * episodes,
+                seed=seed,
+                progress=progress,
+                keep_model=True,
+                env_kwargs={"radius": radius},
+                max_episodes=episodes,
+            )
+            runs.append(
+                {
+                    "seed": seed,
+                    "radius_cm": radius,
+                    "n_segments": task.n_segments,
+                    "svm": _score_cuts(svm, env, eval_seeds),
+                    "swirl": _score_cuts(swirl["model"], swirl["eval_env"], eval_seeds),
+                }
+            )
+            env.close()
+
+    def mean(values: list[float | None]) -> float | None:
+        known = [v for v in values if v is not None]
+        return float(np.mean(known)) if known else None
+
+    summary = []
+    for radius in radii:
+        rows = [r for r in runs if r["radius_cm"] == radius]
+        entry: dict[str, Any] = {"radius_cm": radius, "paper": PAPER_TABLE2[radius]}
+        for method in ("svm", "swirl"):
+            entry[method] = {
+                key: mean([r[method][key] for r in rows])
+                for key in ("success_rate", "cut_rate", "position_error_cm", "tracking_error_cm")
+            }
+        summary.append(entry)
+    combined = sum(round(r["swirl"]["success_rate"] * n_eval) for r in runs)
+    results = {
+        "experiment": "table2",
+        "env_id": preset.env_id,
+        "settings": {
+            "n_demos": preset.n_demos,
+            "episodes_of_exploration": episodes,
+            "n_eval_episodes": n_eval,
+            "seeds": seeds,
+            "quick": quick,
+        },
+        "runs": runs,
+        "summary": summary,
+        "swirl_successes": [combined, n_eval * len(runs)],
+    }
+    write_results(results, out / "results.json")
+
+    def cm(value: float | None) -> str:
+        return "—" if value is None else f"{value:.2f}"
+
+    table = Table(
+        title=f"Table 2, line cutting ({len(seeds)} seed(s) × {n_eval} episodes); errors in cm"
+    )
+    columns = ("line", "SVM cut", "SVM pos / track", "SWIRL cut", "SWIRL pos / track")
+    for column in (*columns, "paper SVM", "paper SWIRL"):
+        table.add_column(column, justify="left" if column == "line" else "right")
+    for entry in summary:
+        svm_row, swirl_row, paper = entry["svm"], entry["swirl"], entry["paper"]
+        table.add_row(
+            "straight" if entry["radius_cm"] is None else f"r = {entry['radius_cm']} cm",
+            f"{svm_row['success_rate']:.0%}",
+            f"{cm(svm_row['position_error_cm'])} / {cm(svm_row['tracking_error_cm'])}",
+            f"{swirl_row['success_rate']:.0%}",
+            f"{cm(swirl_row['position_error_cm'])} / {cm(swirl_row['tracking_error_cm'])}",
+            f"{cm(paper[0])} / {cm(paper[1])}",
+            f"{cm(paper[2])} / {cm(paper[3])}",
+        )
+    Console().print(table)
+    console.print(
+        f"SWIRL cut {combined} of {n_eval * len(runs)} lines (paper: 11 of 15). "
+        f"Wrote {out}/results.json"
+    )
+    return results
+
+
+#: ``sb3-swirl reproduce NAME``: the experiment functions by name.
+REPRODUCTIONS = {"table1": reproduce_table1, "table2": reproduce_table2}

@@ -257,3 +257,10 @@ def test_fit_prints_why_it_dropped_a_region(tmp_path, capsys):
     warned = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning:")]
     assert len(warned) == 1 and "none from demos [5]" in warned[0]
     assert "min_demo_fraction=1.0 needs 6 of 6 demos" in warned[0]
+
+
+def test_reproduce_refuses_unknown_names_and_bad_seeds(capsys):
+    for argv in (["reproduce", "table9"], ["reproduce", "table1", "--seeds", "-1"]):
+        with pytest.raises(SystemExit):
+            main(argv)
+    assert "-1" in capsys.readouterr().err

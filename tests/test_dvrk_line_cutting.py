@@ -140,16 +140,9 @@ def test_bad_constructor_values(kwargs, match):
 
 
 def _success_rate(model, env, seeds) -> float:
-    successes = 0
-    for seed in seeds:
-        obs, _ = env.reset(seed=seed)
-        while True:
-            action, _ = model.predict(obs, deterministic=True)
-            obs, _, terminated, truncated, info = env.step(int(action))
-            if terminated or truncated:
-                break
-        successes += bool(info["is_success"])
-    return successes / len(seeds)
+    from sb3_swirl.experiments import greedy_infos
+
+    return float(np.mean([greedy_infos(model, env, seed)[-1]["is_success"] for seed in seeds]))
 
 
 def test_swirl_pipeline_learns_to_position_and_cut():
@@ -187,3 +180,18 @@ def test_swirl_pipeline_learns_to_position_and_cut():
     model.learn(total_timesteps=2000, reset_num_timesteps=False)
     trained = _success_rate(model, env, eval_seeds)
     assert trained >= 0.4 and trained > start, (start, trained)
+
+
+@pytest.mark.slow
+def test_reproduce_table2_quick(tmp_path):
+    import json
+
+    from sb3_swirl.experiments import reproduce_table2
+
+    reproduce_table2(quick=True, out_dir=tmp_path, progress=False)
+    results = json.loads((tmp_path / "table2" / "results.json").read_text())
+    assert [entry["radius_cm"] for entry in results["summary"]] == [None, 3.0, 1.5]
+    for run in results["runs"]:
+        for method in ("svm", "swirl"):
+            assert 0.0 <= run[method]["success_rate"] <= run[method]["cut_rate"] <= 1.0
+    assert results["swirl_successes"][1] == 15

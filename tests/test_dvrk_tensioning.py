@@ -156,3 +156,43 @@ def test_bad_constructor_values(kwargs, match):
 def test_supervisor_needs_the_tensioning_env():
     with pytest.raises(ValueError, match="DVRKTensioningEnv"):
         TensioningSupervisor(gym.make("CartPole-v1"))
+
+
+def test_segmented_bc_runs_in_the_wrapper_and_grasps(demos):
+    """The paper's segmented-demonstrations baseline: a clone on the lifted observation."""
+    from sb3_swirl.baselines import BCPolicy, lifted_demos
+    from sb3_swirl.fitting import fit_task
+    from swirl_wrappers import SwirlWrapper
+
+    demos, _ = demos
+    task = fit_task(demos, random_state=0)
+    base = gym.make(ENV_ID)
+    observations, actions = lifted_demos(demos, task, base.observation_space)
+    assert observations.shape == (600, 6 + task.n_indices) and actions.shape == (600,)
+    policy = BCPolicy(random_state=0).fit(observations, actions)
+    env = SwirlWrapper(base, task)
+    obs, _ = env.reset(seed=100)
+    for _ in range(60):
+        obs, _, _, _, info = env.step(int(policy.predict(obs)[0]))
+    assert info["grasped"] > 0
+
+
+def test_bc_policy_refuses_mismatched_shapes():
+    from sb3_swirl.baselines import BCPolicy
+
+    with pytest.raises(ValueError, match=r"shape \(n, d\)"):
+        BCPolicy().fit(np.zeros((5, 2)), np.zeros(4))
+
+
+@pytest.mark.slow
+def test_reproduce_table1_quick(tmp_path):
+    import json
+
+    from sb3_swirl.experiments import reproduce_table1
+
+    reproduce_table1(quick=True, out_dir=tmp_path, progress=False)
+    results = json.loads((tmp_path / "table1" / "results.json").read_text())
+    assert set(results["summary"]) == {"rl", "bc", "segmented_bc", "swirl", "swirl_no_bc"}
+    for row in results["summary"].values():
+        assert -150.0 < row["value_mean"] < 0.0 and 0.0 <= row["success_rate"] <= 1.0
+    assert results["settings"]["seeds"] == [0] and results["n_segments"][0] >= 2

@@ -16,11 +16,18 @@ reported as ``terminated``), and robosuite's default end-effector controller doe
 from __future__ import annotations
 
 import os
+import sys
 from collections import OrderedDict
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
+
+# mujoco picks its OpenGL backend once, when it is imported (robosuite imports it): on a
+# headless Linux machine only EGL can render offscreen, and it works with a display too. A
+# backend the user chose (MUJOCO_GL set before this) is kept.
+if sys.platform.startswith("linux"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
 
 #: robosuite robots that stand in for the dVRK's patient-side manipulator. Only the Panda is
 #: tuned and tested: with the same settings the UR5e tracked lines 0.8 cm off and the Sawyer
@@ -282,7 +289,6 @@ class RobosuiteStepEnv(gym.Env):
             gym.logger.warn("render() called without a render_mode; pass one to the constructor")
             return None
         if self._renderer is None:
-            os.environ.setdefault("MUJOCO_GL", "egl")
             import mujoco
 
             height, width = self.render_size

@@ -66,7 +66,7 @@ def _build_task(base: type) -> type:
             robot.set_base_xpos(robot.base_xpos_offset["table"](0.8))
             arena = TableArena(table_full_size=(0.8, 0.8, 0.05), table_offset=(0, 0, TABLE_TOP))
             arena.set_origin([0, 0, 0])
-            view = look_at_camera("dvrk_view", (0, -0.16, TABLE_TOP + 0.22), (0, 0, TABLE_TOP))
+            view = look_at_camera("dvrk_view", (0, -0.22, TABLE_TOP + 0.3), (0, 0, TABLE_TOP))
             arena.worldbody.append(view)
             line = new_body(name="marked_line", pos=(0.0, 0.0, TABLE_TOP + 0.0005))
             for i, (p, q) in enumerate(zip(self.line_shape[:-1], self.line_shape[1:], strict=True)):

@@ -117,9 +117,9 @@ class DVRKTensioningEnv(RobosuiteStepEnv):
 
     A robosuite arm (a Panda; its gripper stands in for the dVRK's needle driver) works over
     an 8 x 8 cm gauze sheet (a MuJoCo ``flexcomp`` grid of 9 x 9 vertices, 0.1 kg) whose two
-    far corners are pinned 5 cm above the table, so that the sheet hangs from them and lies
-    crumpled on the table. The free edge can be grasped: closing the gripper within
-    ``grasp_radius`` (2 cm) of free-edge vertices attaches them to the gripper (constraints,
+    far corners are pinned 5 cm above the table, so that the sheet hangs from them and its free
+    half lies on the table. The free edge can be grasped: closing the gripper within
+    ``grasp_radius`` (2.5 cm) of free-edge vertices attaches them to the gripper (constraints,
     as in SurRoL; a physical pinch of a sheet lying flat does not hold in simulation); opening
     it lets go. The tool moves in 2 mm steps at 10 Hz inside a box that keeps the sheet's
     strain in the range where its elastic model is stable.
