@@ -79,18 +79,35 @@ def robosuite_task(name: str, build: Any) -> type:
             logger.disabled = False
         logger.setLevel(logging.WARNING)
 
+        from robosuite.models.arenas import TableArena
+
         class _Base(ManipulationEnv):
             """A robosuite task without observables: the adapter reads the simulator itself."""
+
+            #: the physics step (s): the same tracking as robosuite's 2 ms at twice the speed
+            model_timestep_override = 0.004
+            #: where the task's ``dvrk_view`` camera sits and the point it looks at (m)
+            view: tuple[tuple[float, float, float], tuple[float, float, float]] = (
+                (0.08, -0.3, TABLE_TOP + 0.2),
+                (-0.02, 0.0, TABLE_TOP),
+            )
+
+            def _table_arena(self) -> Any:
+                """The robot at a table whose top is at :data:`TABLE_TOP`, with the camera."""
+                robot = self.robots[0].robot_model
+                robot.set_base_xpos(robot.base_xpos_offset["table"](0.8))
+                arena = TableArena(table_full_size=(0.8, 0.8, 0.05), table_offset=(0, 0, TABLE_TOP))
+                arena.set_origin([0, 0, 0])
+                arena.worldbody.append(look_at_camera("dvrk_view", *self.view))
+                return arena
 
             def _setup_observables(self) -> OrderedDict:
                 return OrderedDict()
 
             def initialize_time(self, control_freq: float) -> None:
                 super().initialize_time(control_freq)
-                timestep = getattr(self, "model_timestep_override", None)
-                if timestep is not None:
-                    self.model_timestep = timestep
-                    self.sim.model.opt.timestep = timestep
+                self.model_timestep = self.model_timestep_override
+                self.sim.model.opt.timestep = self.model_timestep_override
 
             def reward(self, action: Any = None) -> float:
                 return 0.0

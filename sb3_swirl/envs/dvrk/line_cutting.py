@@ -7,12 +7,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from sb3_swirl.envs.dvrk._robosuite import (
-    TABLE_TOP,
-    RobosuiteStepEnv,
-    look_at_camera,
-    robosuite_task,
-)
+from sb3_swirl.envs.dvrk._robosuite import TABLE_TOP, RobosuiteStepEnv, robosuite_task
 from swirl_wrappers._validation import check_real
 
 #: Action indices of :class:`DVRKLineCuttingEnv`: one 2 mm step of the tool.
@@ -48,26 +43,21 @@ def distance_to_polyline(point: np.ndarray, points: np.ndarray) -> tuple[float, 
 
 
 def _build_task(base: type) -> type:
-    from robosuite.models.arenas import TableArena
     from robosuite.models.tasks import ManipulationTask
     from robosuite.utils.mjcf_utils import new_body, new_geom
 
     class LineCuttingTask(base):
         """robosuite scene: the arm over a table with a marked line (visual only)."""
 
+        view = ((0.0, -0.22, TABLE_TOP + 0.3), (0.0, 0.0, TABLE_TOP))
+
         def __init__(self, line_shape: np.ndarray, **kwargs: Any) -> None:
             self.line_shape = line_shape
-            self.model_timestep_override = 0.004
             super().__init__(**kwargs)
 
         def _load_model(self) -> None:
             super()._load_model()
-            robot = self.robots[0].robot_model
-            robot.set_base_xpos(robot.base_xpos_offset["table"](0.8))
-            arena = TableArena(table_full_size=(0.8, 0.8, 0.05), table_offset=(0, 0, TABLE_TOP))
-            arena.set_origin([0, 0, 0])
-            view = look_at_camera("dvrk_view", (0, -0.22, TABLE_TOP + 0.3), (0, 0, TABLE_TOP))
-            arena.worldbody.append(view)
+            arena = self._table_arena()
             line = new_body(name="marked_line", pos=(0.0, 0.0, TABLE_TOP + 0.0005))
             for i, (p, q) in enumerate(zip(self.line_shape[:-1], self.line_shape[1:], strict=True)):
                 line.append(
@@ -229,13 +219,14 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
         self._cutting = False
         self._errors = []
         self._position_error = float("nan")
+        self._grip = 1.0  # the closed gripper is the tool, from the first settling step on
         start = self._line[0] + [rng.uniform(-0.04, -0.02), rng.uniform(-0.02, 0.02)]
         return np.array([*start, TABLE_TOP + self.tool_height])
 
     def _apply(self, action: int) -> None:
         target = self._goal.copy()
         target[:2] += self.step_size * _DIRECTIONS[action]
-        self._command(target, grip=1.0)
+        self._command(target)
 
     def _observe(self) -> np.ndarray:
         xy = self.tool_position[:2]

@@ -7,12 +7,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from sb3_swirl.envs.dvrk._robosuite import (
-    TABLE_TOP,
-    RobosuiteStepEnv,
-    look_at_camera,
-    robosuite_task,
-)
+from sb3_swirl.envs.dvrk._robosuite import TABLE_TOP, RobosuiteStepEnv, robosuite_task
 
 #: Action indices of :class:`DVRKTensioningEnv`.
 PLUS_X, MINUS_X, PLUS_Y, MINUS_Y, PLUS_Z, MINUS_Z, OPEN, CLOSE = range(8)
@@ -41,24 +36,14 @@ def _build_task(base: type) -> type:
     import xml.etree.ElementTree as ET
 
     import mujoco
-    from robosuite.models.arenas import TableArena
     from robosuite.models.tasks import ManipulationTask
 
     class TensioningTask(base):
         """robosuite scene: the arm over a gauze sheet pinned at its two far corners."""
 
-        def __init__(self, **kwargs: Any) -> None:
-            self.model_timestep_override = 0.004
-            super().__init__(**kwargs)
-
         def _load_model(self) -> None:
             super()._load_model()
-            robot = self.robots[0].robot_model
-            robot.set_base_xpos(robot.base_xpos_offset["table"](0.8))
-            arena = TableArena(table_full_size=(0.8, 0.8, 0.05), table_offset=(0, 0, TABLE_TOP))
-            arena.set_origin([0, 0, 0])
-            view = look_at_camera("dvrk_view", (0.08, -0.3, TABLE_TOP + 0.2), (-0.02, 0, TABLE_TOP))
-            arena.worldbody.append(view)
+            arena = self._table_arena()
             # a 9 x 9 sheet, flat at the pins' height: it drapes over the table when the
             # simulation starts (the adapter settles it once and keeps that as the reset state)
             arena.worldbody.append(
