@@ -265,7 +265,7 @@ def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path)
     for ax in (success_ax, return_ax):
         ax.set_xlabel("training episodes (rollouts)")
         ax.grid(alpha=0.3)
-        ax.legend(loc="lower right")
+        ax.legend(loc="best")
     fig.suptitle(f"{preset.env_id}: {preset.n_demos} demos")
     _finish(fig, path)
 

@@ -49,7 +49,7 @@ def _build_task(base: type) -> type:
     class LineCuttingTask(base):
         """robosuite scene: the arm over a table with a marked line (visual only)."""
 
-        view = ((0.0, -0.22, TABLE_TOP + 0.3), (0.0, 0.0, TABLE_TOP))
+        view = ((0.2, -0.12, TABLE_TOP + 0.22), (0.0, -0.01, TABLE_TOP))
 
         def __init__(self, line_shape: np.ndarray, **kwargs: Any) -> None:
             self.line_shape = line_shape
