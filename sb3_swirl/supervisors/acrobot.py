@@ -6,6 +6,7 @@ import gymnasium as gym
 import numpy as np
 
 from sb3_swirl.envs.acrobot import NoisyAcrobotEnv
+from sb3_swirl.supervisors._shared import controlled_env
 from swirl_wrappers._validation import check_int
 
 
@@ -54,12 +55,7 @@ class AcrobotSupervisor:
     """
 
     def __init__(self, env: gym.Env, seed: int | None = None, horizon: int = 10) -> None:
-        unwrapped = env.unwrapped
-        if not isinstance(unwrapped, NoisyAcrobotEnv):
-            raise ValueError(
-                f"AcrobotSupervisor controls a NoisyAcrobotEnv, got {type(unwrapped).__name__}"
-            )
-        self.env = unwrapped
+        self.env = controlled_env(env, NoisyAcrobotEnv, "AcrobotSupervisor")
         self.seed = seed
         self.horizon = check_int("horizon", horizon, low=1)
 

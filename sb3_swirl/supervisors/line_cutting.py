@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 
 from sb3_swirl.envs.dvrk.line_cutting import _DIRECTIONS, PLUS_X, DVRKLineCuttingEnv
-from sb3_swirl.supervisors._keyboard import step_towards
+from sb3_swirl.supervisors._shared import controlled_env, step_towards
 
 #: The supervisor's phases: move to the line's start, then follow the line.
 POSITION, FOLLOW = range(2)
@@ -56,13 +56,7 @@ class LineCuttingSupervisor:
         lookahead: float = 0.004,
         approach: float = 0.012,
     ) -> None:
-        unwrapped = env.unwrapped
-        if not isinstance(unwrapped, DVRKLineCuttingEnv):
-            raise ValueError(
-                "LineCuttingSupervisor controls a DVRKLineCuttingEnv, "
-                f"got {type(unwrapped).__name__}"
-            )
-        self.env = unwrapped
+        self.env = controlled_env(env, DVRKLineCuttingEnv, "LineCuttingSupervisor")
         self.lookahead = lookahead
         self.approach = approach
         self.rng = np.random.default_rng(seed)

@@ -16,7 +16,7 @@ from sb3_swirl.envs.dvrk.tensioning import (
     PLUS_Z,
     DVRKTensioningEnv,
 )
-from sb3_swirl.supervisors._keyboard import step_towards
+from sb3_swirl.supervisors._shared import controlled_env, step_towards
 
 #: The supervisor's phases.
 REACH, GRASP, LIFT, TENSION = range(4)
@@ -75,12 +75,7 @@ class TensioningSupervisor:
         grasp_steps: int = 2,
         max_wait: int = 5,
     ) -> None:
-        unwrapped = env.unwrapped
-        if not isinstance(unwrapped, DVRKTensioningEnv):
-            raise ValueError(
-                f"TensioningSupervisor controls a DVRKTensioningEnv, got {type(unwrapped).__name__}"
-            )
-        self.env = unwrapped
+        self.env = controlled_env(env, DVRKTensioningEnv, "TensioningSupervisor")
         self.aim_spread = aim_spread
         self.target_disparity = target_disparity
         self.grasp_steps = grasp_steps

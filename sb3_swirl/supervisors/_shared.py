@@ -1,8 +1,23 @@
-"""The one move a keyboard-like supervisor makes: a fixed step along one axis."""
+"""Pieces the supervisors share: the env they control, and a keyboard-like step."""
 
 from __future__ import annotations
 
+from typing import TypeVar
+
+import gymnasium as gym
 import numpy as np
+
+EnvT = TypeVar("EnvT", bound=gym.Env)
+
+
+def controlled_env(env: gym.Env, env_class: type[EnvT], supervisor: str) -> EnvT:
+    """``env.unwrapped`` if it is an ``env_class``; else a ValueError naming both classes."""
+    unwrapped = env.unwrapped
+    if not isinstance(unwrapped, env_class):
+        raise ValueError(
+            f"{supervisor} controls a {env_class.__name__}, got {type(unwrapped).__name__}"
+        )
+    return unwrapped
 
 
 def step_towards(
