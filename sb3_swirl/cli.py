@@ -272,6 +272,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="results", help="output folder (default results/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_reproduce)
+
+    p = sub.add_parser(
+        "zoo",
+        help="RL Baselines3 Zoo with swirl_dqn: train, enjoy, plot_train, all_plots, "
+        "plot_from_file, with rl_zoo3's own arguments",
+        add_help=False,
+    )
+    p.add_argument("args", nargs=argparse.REMAINDER)
     return parser
 
 
@@ -282,6 +290,11 @@ def _show_warning(message: Warning | str, *args: Any, **kwargs: Any) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sb3-swirl`` command."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["zoo"]:  # rl_zoo3 parses its own arguments
+        from sb3_swirl.zoo import main as zoo_main
+
+        return zoo_main(argv[1:])
     args = build_parser().parse_args(argv)
     try:
         with warnings.catch_warnings():

@@ -51,7 +51,9 @@ class SwirlDQN(DQN):
         As in :class:`stable_baselines3.DQN`.
     demonstrations : sequence of Demonstration, optional
         Demos of the task (states; actions optional), in any format
-        :func:`sb3_swirl.as_demonstrations` reads. ``None`` gives plain DQN on the proxy task.
+        :func:`sb3_swirl.as_demonstrations` reads. ``None``: those the env carries as its
+        ``demonstrations`` attribute (:class:`sb3_swirl.zoo.SwirlTaskWrapper`, which rl_zoo3
+        configs use), else none, which gives plain DQN on the proxy task.
     task : TaskModel, optional
         Checked against the env's task: they must be the same.
     bc_loss : {"margin", "cross_entropy"}
@@ -182,6 +184,8 @@ class SwirlDQN(DQN):
             device=device,
             _init_setup_model=False,
         )
+        if demonstrations is None and self.env is not None and self.env.has_attr("demonstrations"):
+            demonstrations = self.env.get_attr("demonstrations", indices=[0])[0]
         self.demonstrations = None if demonstrations is None else as_demonstrations(demonstrations)
         self._bc_done = False
         self.bc_n_pairs_ = 0

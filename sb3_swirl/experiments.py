@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
@@ -28,75 +28,54 @@ console = Console(stderr=True)
 
 @dataclass(frozen=True)
 class Preset:
-    """What the main job runs on one shipped task."""
+    """What the main job runs on one shipped task.
+
+    The demos, the fit and the budget are those of the task's entry in
+    ``zoo_configs/swirl_dqn.yml`` (its ``SwirlTaskWrapper`` settings and ``n_timesteps``), so
+    ``sb3-swirl demo`` and ``sb3-swirl zoo train`` run the same setup.
+    """
 
     env_id: str
-    n_demos: int
-    total_timesteps: int
     eval_freq: int
     n_eval_episodes: int
     target_success: float
-    fit_kwargs: dict[str, Any] = field(default_factory=dict)
-    #: ``gym.make`` arguments of the env the supervisor demonstrates on
-    demo_env_kwargs: dict[str, Any] = field(default_factory=dict)
     #: the two observation axes ``segments.png`` draws
     plot_dims: tuple[int, int] = (0, 1)
 
+    @property
+    def swirl(self) -> dict[str, Any]:
+        """The ``SwirlTaskWrapper`` settings of the task's ``swirl_dqn`` entry."""
+        return _swirl_spec(load_hyperparams("swirl_dqn", self.env_id))
+
+    @property
+    def n_demos(self) -> int:
+        """Supervisor demos (``demos: {n_demos: ...}``)."""
+        return int(self.swirl["demos"]["n_demos"])
+
+    @property
+    def fit_kwargs(self) -> dict[str, Any]:
+        """:func:`sb3_swirl.fit_task` settings (``fit:``)."""
+        return dict(self.swirl.get("fit") or {})
+
+    @property
+    def demo_env_kwargs(self) -> dict[str, Any]:
+        """``gym.make`` arguments of the env the supervisor demonstrates on."""
+        return dict(self.swirl["demos"].get("env_kwargs") or {})
+
+    @property
+    def total_timesteps(self) -> int:
+        """The training budget (``n_timesteps``)."""
+        return int(load_hyperparams("swirl_dqn", self.env_id)["n_timesteps"])
+
 
 PRESETS: dict[str, Preset] = {
-    # Five demos give each region about five points, nearly identical along some axes: a
-    # covariance floor of 0.1 of each axis's variance keeps the first region wide enough for
-    # new start states (see the README's tuning table).
-    "parking": Preset(
-        "sb3_swirl/ParallelParking-v0",
-        5,
-        30_000,
-        1_000,
-        20,
-        0.95,
-        # tuned without time normalisation; with it (the new default), the held-out median
-        # rollout ratio read 0.058 against 0.041 without (README, Results)
-        fit_kwargs={"reg_covar": 0.1, "normalize_time": False},
-    ),
-    # Raw wrapped angles cannot hold the goal (tip above the line) in one ellipsoid; the
-    # absolute link angles theta1 and theta1 + theta2 as (cos, sin), plus the velocities, can.
-    "acrobot": Preset(
-        "sb3_swirl/NoisyAcrobot-v0",
-        15,
-        60_000,
-        10_000,  # evaluation episodes are up to 1000 steps: evaluate less often
-        10,
-        0.95,
-        # measured with the segmentation defaults before bench_segmentation chose new ones
-        fit_kwargs={
-            "angles": [[0], [0, 1]],
-            "dims": [2, 3],
-            "reg_covar": 1e-3,
-            "normalize_time": False,
-        },
-    ),
-    # The paper's §10.2: five demos on straight lines at random positions (±1 cm); the agent
-    # then learns on one line.
-    "linecutting": Preset(
-        "sb3_swirl/DVRKLineCutting-v0",
-        5,
-        6_000,
-        500,
-        10,
-        0.95,
-        demo_env_kwargs={"line_jitter": 1.0},
-    ),
-    # The paper's §10.1: 15 demos, then 100 rollouts of 100 steps; the segments seen from the
-    # side (x, height): reach down, lift, pull.
-    "tensioning": Preset(
-        "sb3_swirl/DVRKTensioning-v0",
-        15,
-        10_000,
-        2_000,
-        5,
-        0.95,
-        plot_dims=(0, 2),
-    ),
+    "parking": Preset("sb3_swirl/ParallelParking-v0", 1_000, 20, 0.95),
+    # evaluation episodes are up to 1000 steps: evaluate less often
+    "acrobot": Preset("sb3_swirl/NoisyAcrobot-v0", 10_000, 10, 0.95),
+    # the paper's §10.2: demos on straight lines at random positions; the agent learns on one
+    "linecutting": Preset("sb3_swirl/DVRKLineCutting-v0", 500, 10, 0.95),
+    # the paper's §10.1; the segments seen from the side (x, height): reach down, lift, pull
+    "tensioning": Preset("sb3_swirl/DVRKTensioning-v0", 2_000, 5, 0.95, plot_dims=(0, 2)),
 }
 
 _ZOO_ONLY_KEYS = {"n_timesteps", "policy", "env_wrapper", "normalize", "frame_stack", "callback"}
@@ -128,13 +107,20 @@ def _algo_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
     return kwargs
 
 
-def _swirl_wrapper_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
-    """The ``SwirlWrapper`` arguments of an rl-zoo entry's ``env_wrapper`` (no task)."""
+def _swirl_spec(hyperparams: dict[str, Any]) -> dict[str, Any]:
+    """The ``sb3_swirl.zoo.SwirlTaskWrapper`` settings of an rl-zoo entry's ``env_wrapper``."""
     wrappers = hyperparams.get("env_wrapper") or []
     for entry in wrappers if isinstance(wrappers, list) else [wrappers]:
-        if isinstance(entry, dict) and "swirl_wrappers.SwirlWrapper" in entry:
-            return dict(entry["swirl_wrappers.SwirlWrapper"] or {})
+        if isinstance(entry, dict) and "sb3_swirl.zoo.SwirlTaskWrapper" in entry:
+            return dict(entry["sb3_swirl.zoo.SwirlTaskWrapper"] or {})
     return {}
+
+
+def _swirl_wrapper_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
+    """The ``SwirlWrapper`` arguments (no task) of an rl-zoo entry's ``SwirlTaskWrapper``."""
+    spec = _swirl_spec(hyperparams)
+    keys = ("reward_config", "terminate_on_completion", "state_key")
+    return {key: spec[key] for key in keys if key in spec}
 
 
 def rollouts_to_success(curve: list[dict[str, float]], target: float) -> int | None:
@@ -384,7 +370,8 @@ def run_demo(
         ratio = swirl["rollouts_to_target"] / dqn["rollouts_to_target"]
     results = {
         "task": name,
-        "preset": asdict(preset) | {"n_demos": n_demos, "total_timesteps": steps},
+        "preset": asdict(preset)
+        | {"n_demos": n_demos, "total_timesteps": steps, "fit_kwargs": preset.fit_kwargs},
         "seed": seed,
         "n_segments": task.n_segments,
         "fit_time_s": fit_time,

@@ -152,7 +152,7 @@ def _success_rate(model, env, seeds) -> float:
 def test_swirl_pipeline_learns_to_position_and_cut():
     """Straight-line demos -> two segments (position, cut) -> SwirlDQN learns in 2000 steps."""
     from sb3_swirl.dqn import SwirlDQN
-    from sb3_swirl.experiments import load_hyperparams
+    from sb3_swirl.experiments import PRESETS
     from sb3_swirl.fitting import fit_task
     from swirl_wrappers import SwirlWrapper
 
@@ -163,8 +163,7 @@ def test_swirl_pipeline_learns_to_position_and_cut():
     first = task.regions[0].mean
     assert abs(first[0] - -2.0) < 0.5 and first[2] < 0.3
 
-    hyperparams = load_hyperparams("swirl_dqn", ENV_ID)
-    reward_config = hyperparams["env_wrapper"][0]["swirl_wrappers.SwirlWrapper"]["reward_config"]
+    reward_config = PRESETS["linecutting"].swirl["reward_config"]
     env = SwirlWrapper(gym.make(ENV_ID), task, reward_config=reward_config)
     model = SwirlDQN(
         "MlpPolicy",

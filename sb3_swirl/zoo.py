@@ -1,0 +1,590 @@
+"""RL Baselines3 Zoo with SWIRL: ``sb3-swirl zoo train|enjoy|plot_train|all_plots|plot_from_file``.
+
+rl_zoo3 has no plugin hook for algorithms, so this entry point adds ``swirl_dqn``
+(:class:`~sb3_swirl.SwirlDQN`) to rl_zoo3's algorithm table and Optuna sampler tables
+(:func:`register`) and then hands over to rl_zoo3's own ``train`` / ``enjoy`` / plotting, with
+rl_zoo3's own arguments. ``python -m sb3_swirl.zoo ...`` is the same.
+
+One YAML entry describes a SWIRL run. The SWIRL part is the env wrapper
+:class:`SwirlTaskWrapper`: where the demos come from, how the task is fitted, the proxy reward;
+every other key is rl_zoo3's (``n_timesteps``, ``policy``, ...) or a ``SwirlDQN`` argument::
+
+    sb3_swirl/ParallelParking-v0:
+      n_timesteps: 30000
+      policy: MlpPolicy
+      env_wrapper:
+        - sb3_swirl.zoo.SwirlTaskWrapper:
+            demos: {n_demos: 5, seed: 0}   # the env's supervisor; or a demo file path
+            fit: {reg_covar: 0.1}          # fit_task settings
+            reward_config: {mode: potential, task_reward_weight: 10.0, gamma: 0.99}
+      learning_rate: 0.0003
+      prefill_replay: true
+
+``sb3-swirl zoo train`` checks the entry before rl_zoo3 starts (unknown keys, missing files,
+demos that do not match the env) and fits the task once; ``enjoy`` runs a trained SwirlDQN with
+the task saved in the model and prints the segment it is in.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import difflib
+import inspect
+import json
+import os
+import sys
+import tempfile
+import threading
+from collections.abc import Iterator, Mapping
+from importlib.resources import files
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import yaml
+
+from sb3_swirl.demos import Demonstration, load_demos
+from swirl_wrappers import SwirlWrapper, TaskModel
+
+__all__ = ["RL_ZOO3_VERSION", "SwirlTaskWrapper", "check_config", "main", "register"]
+
+#: The rl_zoo3 release whose tables :func:`register` extends (pinned by the ``zoo`` extra).
+RL_ZOO3_VERSION = "2.9.2"
+
+#: Set by ``enjoy``: a task JSON that :class:`SwirlTaskWrapper` uses instead of fitting (the
+#: task saved with the model). An environment variable, so ``--n-envs`` subprocesses see it.
+TASK_FILE_ENV = "SB3_SWIRL_ZOO_TASK"
+
+# rl_zoo3 keys that never reach the algorithm's constructor (ExperimentManager pops them)
+_ZOO_KEYS = {
+    "n_timesteps",
+    "n_envs",
+    "policy",
+    "env_wrapper",
+    "vec_env_wrapper",
+    "callback",
+    "normalize",
+    "frame_stack",
+    "env_kwargs",
+    "monitor_kwargs",
+    "noise_type",
+    "noise_std",
+}
+_DEMO_KEYS = ("n_demos", "seed", "env_kwargs")
+
+# fitted tasks (and their demos) by spec: one fit for the train env, the eval env, every trial
+_FITTED: dict[str, tuple[TaskModel, list[Demonstration] | None]] = {}
+# -optimize: the sampled SWIRL settings of the current trial (the sampler, the env creation and
+# the model of a trial run in one thread; Optuna's n_jobs runs trials in threads)
+_TRIAL = threading.local()
+
+
+def _closest(name: str, options: Any) -> str:
+    match = difflib.get_close_matches(name, sorted(options), n=1)
+    return f" (did you mean {match[0]!r}?)" if match else ""
+
+
+def _check_keys(where: str, given: Mapping[str, Any], allowed: Any) -> None:
+    for key in given:
+        if key not in allowed:
+            raise ValueError(
+                f"{where}: unknown key {key!r}{_closest(str(key), allowed)}; known keys: "
+                f"{', '.join(sorted(allowed))}"
+            )
+
+
+def _flat_dim(space: gym.Space) -> int:
+    return int(np.prod(space.shape)) if space.shape is not None else -1
+
+
+def _load_demos(spec: Any, env: gym.Env, seed: int) -> tuple[list[Demonstration], str]:
+    """The demos of a ``demos:`` value and a description for messages."""
+    if isinstance(spec, str | os.PathLike):
+        path = Path(spec).expanduser()
+        if not path.is_file():
+            raise ValueError(
+                f"SwirlTaskWrapper demos: file {os.fspath(spec)!r} not found (relative paths "
+                f"start from the working folder, {os.getcwd()})"
+            )
+        return load_demos(path), f"demo file {os.fspath(spec)}"
+    if not isinstance(spec, Mapping):
+        raise ValueError(
+            "SwirlTaskWrapper demos: expected a demo file path or a mapping "
+            f"{{n_demos: N, seed: S, env_kwargs: {{...}}}} for the env's supervisor, got {spec!r}"
+        )
+    _check_keys("SwirlTaskWrapper demos", spec, _DEMO_KEYS)
+    if "n_demos" not in spec:
+        raise ValueError("SwirlTaskWrapper demos: n_demos is required (demos of the supervisor)")
+    from sb3_swirl.supervisors import SUPERVISORS, collect_demos
+
+    env_id = env.spec.id if env.spec is not None else None
+    if env_id not in SUPERVISORS:
+        raise ValueError(
+            f"SwirlTaskWrapper demos: {env_id} ships no supervisor to collect demos from; give "
+            "a demo file (`demos: path/to/demos.npz`, written by sb3_swirl.save_demos)"
+        )
+    demos = collect_demos(
+        env_id, spec["n_demos"], seed=spec.get("seed", seed), **spec.get("env_kwargs", {})
+    )
+    return list(demos), f"{spec['n_demos']} supervisor demos of {env_id}"
+
+
+def _check_demos_fit_env(
+    demos: list[Demonstration], source: str, env: gym.Env, state_key: str | None
+) -> None:
+    """Refuse demos whose states or actions do not match ``env``'s spaces, naming ``source``."""
+    space = env.observation_space
+    if state_key is not None and isinstance(space, gym.spaces.Dict):
+        space = space[state_key]
+    dim = _flat_dim(space)
+    n_actions = getattr(env.action_space, "n", None)
+    for i, demo in enumerate(demos):
+        if demo.observations.shape[1] != dim:
+            raise ValueError(
+                f"{source}, demo {i}: observations have {demo.observations.shape[1]} dims, "
+                f"but {env.spec.id if env.spec else 'the env'}'s observations have {dim} "
+                f"({space})"
+            )
+        if demo.actions is not None and n_actions is not None:
+            actions = np.asarray(demo.actions)
+            if actions.size and (actions.min() < 0 or actions.max() >= n_actions):
+                raise ValueError(
+                    f"{source}, demo {i}: actions range over [{actions.min():g}, "
+                    f"{actions.max():g}], outside the env's {env.action_space}"
+                )
+
+
+def _fitted_task(
+    env: gym.Env,
+    demos: Any,
+    task: Any,
+    fit: Mapping[str, Any],
+    seed: int,
+    state_key: str | None,
+) -> tuple[TaskModel, list[Demonstration] | None]:
+    """The task (fitted, or read from ``task``) and the demos, once per spec."""
+    from sb3_swirl.fitting import fit_task
+
+    if demos is None and task is None:
+        raise ValueError(
+            "SwirlTaskWrapper needs `demos` (a demo file, or {n_demos: N} for the env's "
+            "supervisor) or `task` (a task JSON saved by `sb3-swirl fit` or TaskModel.to_json)"
+        )
+    if task is not None and fit:
+        raise ValueError("SwirlTaskWrapper: give `fit` or a fitted `task`, not both")
+    if not isinstance(fit, Mapping):
+        raise ValueError(f"SwirlTaskWrapper fit: expected fit_task settings, got {fit!r}")
+    env_id = env.spec.id if env.spec is not None else repr(env)
+    key = json.dumps([env_id, demos, task, dict(fit), seed, state_key], sort_keys=True, default=str)
+    if key in _FITTED:
+        return _FITTED[key]
+    demonstrations = None
+    if demos is not None:
+        demonstrations, source = _load_demos(demos, env, seed)
+        _check_demos_fit_env(demonstrations, source, env, state_key)
+    if task is not None:
+        path = Path(task).expanduser()
+        if not path.is_file():
+            raise ValueError(f"SwirlTaskWrapper task: file {os.fspath(task)!r} not found")
+        model = TaskModel.from_json(path)
+    else:
+        try:
+            model = fit_task(demonstrations, random_state=seed, **fit)
+        except TypeError as exc:  # unknown settings: fit_task names them and the known ones
+            raise ValueError(f"SwirlTaskWrapper fit: {exc}") from None
+    _FITTED[key] = (model, demonstrations)
+    return _FITTED[key]
+
+
+class SwirlTaskWrapper(SwirlWrapper):
+    """:class:`~swirl_wrappers.SwirlWrapper` that builds its task from a config (rl_zoo3's
+    ``env_wrapper``).
+
+    It loads or collects the demos, fits the task with :func:`sb3_swirl.fit_task` (once per
+    process for the same settings: the training env, the evaluation env and every sub-env
+    share it) and lifts the env with it. The demos ride along as :attr:`demonstrations`, which
+    :class:`~sb3_swirl.SwirlDQN` clones when it is given none. The env's own reward stays in
+    ``info["task_reward"]``, and an rl_zoo3 ``Monitor`` (inside this wrapper) records it, so
+    the zoo's evaluations, logs and plots report the true task reward and success.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+    demos : str or mapping, optional
+        A demo file in any format :func:`sb3_swirl.load_demos` reads, or
+        ``{n_demos: N, seed: S, env_kwargs: {...}}``: ``N`` demos of the env's shipped
+        supervisor (``seed`` defaults to ``seed``; ``env_kwargs`` go to ``gym.make`` for the
+        demonstrations only).
+    task : str, optional
+        A fitted task JSON (``sb3-swirl fit``, ``TaskModel.to_json``) instead of fitting one;
+        ``demos`` are then only cloned.
+    fit : mapping, optional
+        :func:`sb3_swirl.fit_task` settings (``reg_covar``, ``indicator``, ``dims``, ...).
+    seed : int
+        The fit's ``random_state`` (and the supervisor's default seed).
+    reward_config, terminate_on_completion, state_key :
+        As in :class:`~swirl_wrappers.SwirlWrapper`.
+
+    Attributes
+    ----------
+    demonstrations : list of Demonstration or None
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        demos: str | Mapping[str, Any] | None = None,
+        task: str | None = None,
+        fit: Mapping[str, Any] | None = None,
+        seed: int = 0,
+        reward_config: Mapping[str, Any] | None = None,
+        terminate_on_completion: bool = False,
+        state_key: str | None = None,
+    ) -> None:
+        saved = os.environ.get(TASK_FILE_ENV)
+        reward = {**(reward_config or {}), **getattr(_TRIAL, "reward_config", {})}
+        if saved:  # enjoy: the task the model was trained with
+            model, demonstrations = TaskModel.from_json(Path(saved)), None
+        else:
+            model, demonstrations = _fitted_task(
+                env, demos, task, {**(fit or {}), **getattr(_TRIAL, "fit", {})}, seed, state_key
+            )
+        super().__init__(
+            env,
+            model,
+            reward_config=reward,
+            terminate_on_completion=terminate_on_completion,
+            state_key=state_key,
+        )
+        self.demonstrations = demonstrations
+        self._announce = bool(saved)
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        self._steps, self._task_return = 0, 0.0
+        return super().reset(**kwargs)
+
+    def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
+        before = self.segment
+        obs, reward, terminated, truncated, info = super().step(action)
+        if self._announce:  # enjoy: say where the agent is in the task
+            self._steps += 1
+            self._task_return += float(info["task_reward"])
+            k = self.task.n_segments
+            if self.segment != before:
+                where = f"segment {self.segment} (of 0-{k - 1})" if self.segment < k else "done"
+                print(f"step {self._steps}: {where}")
+            if terminated or truncated:
+                print(
+                    f"episode ends at step {self._steps}, {self.segment} of {k} regions "
+                    f"reached: true return {self._task_return:.2f}, success "
+                    f"{info.get('is_success')} (the episode reward below is the proxy reward)",
+                    flush=True,
+                )
+        return obs, reward, terminated, truncated, info
+
+
+# ---------------------------------------------------------------------- Optuna (-optimize)
+# SWIRL's own settings: in the wrapper (fit, reward) and in SwirlDQN (BC)
+_WRAPPER_PARAMS = {"reg_covar": "fit", "task_reward_weight": "reward_config"}
+_SWIRL_PARAMS = {*_WRAPPER_PARAMS, "bc_epochs", "demo_loss_coef"}
+
+
+def _route_trial_params(params: dict[str, Any]) -> dict[str, Any]:
+    """Put a trial's wrapper settings where :class:`SwirlTaskWrapper` reads them; return the
+    algorithm's."""
+    _TRIAL.fit, _TRIAL.reward_config = {}, {}
+    agent = {}
+    for key, value in params.items():
+        if key in _WRAPPER_PARAMS:
+            getattr(_TRIAL, _WRAPPER_PARAMS[key])[key] = value
+        else:
+            agent[key] = value
+    if "gamma" in agent:  # potential shaping is policy-invariant only with the agent's gamma
+        _TRIAL.reward_config["gamma"] = agent["gamma"]
+    return agent
+
+
+def sample_swirl_dqn_params(
+    trial: Any, n_actions: int, n_envs: int, additional_args: dict[str, Any]
+) -> dict[str, Any]:
+    """rl_zoo3's DQN search space plus SWIRL's: the region covariance floor ``reg_covar``, the
+    weight of the true reward in the proxy reward, BC epochs and the demo loss weight."""
+    from rl_zoo3.hyperparams_opt import sample_dqn_params
+
+    params = sample_dqn_params(trial, n_actions, n_envs, additional_args)
+    params["reg_covar"] = trial.suggest_float("reg_covar", 1e-4, 1.0, log=True)
+    params["task_reward_weight"] = trial.suggest_float("task_reward_weight", 1.0, 100.0, log=True)
+    params["bc_epochs"] = trial.suggest_categorical("bc_epochs", [0, 100, 300])
+    params["demo_loss_coef"] = trial.suggest_float("demo_loss_coef", 0.0, 2.0)
+    return _route_trial_params(params)
+
+
+def convert_swirl_dqn_params(sampled: dict[str, Any]) -> dict[str, Any]:
+    """A finished trial's parameters as hyperparameters (``--trial-id``), SWIRL's included."""
+    from rl_zoo3.hyperparams_opt import convert_offpolicy_params
+
+    swirl = {k: v for k, v in sampled.items() if k in _SWIRL_PARAMS}
+    dqn = convert_offpolicy_params({k: v for k, v in sampled.items() if k not in swirl})
+    return _route_trial_params(dqn | swirl)
+
+
+def register() -> None:
+    """Add ``swirl_dqn`` to rl_zoo3's ``ALGOS``, ``HYPERPARAMS_SAMPLER`` and
+    ``HYPERPARAMS_CONVERTER`` (idempotent), and register the ``sb3_swirl/`` envs."""
+    import rl_zoo3
+    from rl_zoo3 import hyperparams_opt, utils
+
+    from sb3_swirl.dqn import SwirlDQN
+
+    if rl_zoo3.__version__ != RL_ZOO3_VERSION:
+        import warnings
+
+        warnings.warn(
+            f"sb3-swirl extends rl_zoo3 {RL_ZOO3_VERSION}, found {rl_zoo3.__version__}: "
+            f'install the pinned one (pip install "sb3-swirl[zoo]")',
+            stacklevel=2,
+        )
+    utils.ALGOS["swirl_dqn"] = SwirlDQN
+    hyperparams_opt.HYPERPARAMS_SAMPLER["swirl_dqn"] = sample_swirl_dqn_params
+    hyperparams_opt.HYPERPARAMS_CONVERTER["swirl_dqn"] = convert_swirl_dqn_params
+
+
+# ---------------------------------------------------------------------- config checks
+def shipped_config(algo: str) -> Path:
+    """The path of ``zoo_configs/{algo}.yml`` as installed with the package."""
+    return Path(str(files("sb3_swirl.zoo_configs") / f"{algo}.yml"))
+
+
+def check_config(
+    algo: str,
+    env_id: str,
+    config: str | os.PathLike,
+    overrides: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Check the rl_zoo3 entry for ``env_id`` in ``config`` before anything trains.
+
+    Unknown keys (neither rl_zoo3's nor the algorithm's), unknown ``SwirlTaskWrapper`` keys,
+    missing demo or task files and demos that do not match the env fail with a message naming
+    the file, the entry and the key. The SWIRL task is fitted here (and cached for the run).
+
+    Returns
+    -------
+    dict
+        The entry (``default`` if the file has none for ``env_id``).
+    """
+    from rl_zoo3.utils import ALGOS
+
+    path = os.fspath(config)
+    if not path.endswith((".yml", ".yaml")):
+        return {}  # a .py or module config: rl_zoo3 reads it, nothing to check here
+    if not Path(path).is_file():
+        raise ValueError(f"config file {path} not found")
+    with open(path) as fh:
+        try:
+            entries = yaml.safe_load(fh) or {}
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path} is not valid YAML: {exc}") from None
+    name = env_id if env_id in entries else "default"
+    if name not in entries:
+        raise ValueError(f"{path} has no entry for {env_id} and no default entry")
+    entry = entries[name]
+    where = f"{path}, entry {name!r}"
+    if not isinstance(entry, Mapping):
+        raise ValueError(f"{where}: expected a mapping of hyperparameters, got {entry!r}")
+    entry = {**entry, **(overrides or {})}
+    # rl_zoo3 passes env, seed, verbose, device and tensorboard_log itself
+    passed = {"self", "env", "seed", "verbose", "device", "tensorboard_log", "_init_setup_model"}
+    _check_keys(where, entry, _ZOO_KEYS | set(inspect.signature(ALGOS[algo]).parameters) - passed)
+    wrappers = entry.get("env_wrapper") or []
+    specs = [
+        dict(next(iter(w.values())) or {})
+        for w in (wrappers if isinstance(wrappers, list) else [wrappers])
+        if isinstance(w, Mapping) and str(next(iter(w))).endswith(".SwirlTaskWrapper")
+    ]
+    for spec in specs:
+        allowed = set(inspect.signature(SwirlTaskWrapper).parameters) - {"env"}
+        _check_keys(f"{where}, SwirlTaskWrapper", spec, allowed)
+        env = gym.make(env_id, **(entry.get("env_kwargs") or {}))
+        try:
+            with _reraise_in(where):
+                SwirlTaskWrapper(env, **spec)
+        finally:
+            env.close()
+    if algo == "swirl_dqn" and not specs:
+        raise ValueError(
+            f"{where}: swirl_dqn needs the SWIRL task: add an env_wrapper entry "
+            "`sb3_swirl.zoo.SwirlTaskWrapper: {demos: ..., fit: {...}}` (see zoo_configs/)"
+        )
+    return dict(entry)
+
+
+@contextlib.contextmanager
+def _reraise_in(where: str) -> Iterator[None]:
+    try:
+        yield
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+# ---------------------------------------------------------------------- entry points
+def _option(argv: list[str], *names: str, default: str | None = None) -> str | None:
+    """The value of the last ``--name value`` / ``--name=value`` among ``names`` in ``argv``."""
+    value = default
+    for i, arg in enumerate(argv):
+        for name in names:
+            if arg == name and i + 1 < len(argv):
+                value = argv[i + 1]
+            elif arg.startswith(name + "="):
+                value = arg.split("=", 1)[1]
+    return value
+
+
+def _train(argv: list[str]) -> int:
+    from rl_zoo3.train import train
+
+    algo = _option(argv, "--algo", default="ppo")
+    env_id = _option(argv, "--env", default="CartPole-v1")
+    config = _option(argv, "-conf", "--conf-file")
+    if config is None and (algo == "swirl_dqn" or str(env_id).startswith("sb3_swirl/")):
+        config = os.fspath(shipped_config(str(algo)))
+        if Path(config).is_file():
+            argv = [*argv, "--conf-file", config]
+            print(f"sb3-swirl: hyperparameters from {config}", flush=True)
+    if config is not None and algo in _algos():
+        try:
+            if (
+                algo == "swirl_dqn"
+                and _option(argv, "--vec-env") == "subproc"
+                and ("-optimize" in argv or "--optimize-hyperparameters" in argv)
+            ):
+                raise ValueError(
+                    "-optimize with --vec-env subproc: a trial's SWIRL settings (reg_covar, "
+                    "task_reward_weight) would not reach the sub-processes; use the default "
+                    "--vec-env dummy (Optuna's --n-jobs runs trials in parallel)"
+                )
+            check_config(str(algo), str(env_id), config, _custom_hyperparams(argv))
+        except ValueError as exc:  # before anything trains: one clear line, no traceback
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    _run(train, "train", argv)
+    if algo == "swirl_dqn":
+        _write_task(argv, str(env_id))
+    return 0
+
+
+def _custom_hyperparams(argv: list[str]) -> dict[str, Any]:
+    """rl_zoo3's ``-params key:value ...`` overrides, parsed as rl_zoo3 parses them."""
+    import argparse
+
+    from rl_zoo3.utils import StoreDict
+
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("-params", "--hyperparams", nargs="+", action=StoreDict, default={})
+    return dict(parser.parse_known_args(argv)[0].hyperparams or {})
+
+
+def _algos() -> dict[str, Any]:
+    from rl_zoo3.utils import ALGOS
+
+    return ALGOS
+
+
+def _model_path(argv: list[str], env_id: str) -> tuple[str, str]:
+    """rl_zoo3's (model path, log path) for the ``enjoy``-style options in ``argv``."""
+    from huggingface_sb3 import EnvironmentName
+    from rl_zoo3.utils import get_model_path
+
+    _, model_path, log_path = get_model_path(
+        int(_option(argv, "--exp-id", default="0")),
+        str(_option(argv, "-f", "--folder", default="rl-trained-agents")),
+        str(_option(argv, "--algo", default="ppo")),
+        EnvironmentName(env_id),
+        "--load-best" in argv,
+        _option(argv, "--load-checkpoint"),
+        "--load-last-checkpoint" in argv,
+    )
+    return model_path, log_path
+
+
+def _write_task(argv: list[str], env_id: str) -> None:
+    """Write the trained model's task as ``task.json`` beside rl_zoo3's ``config.yml``."""
+    if "-optimize" in argv or "--optimize-hyperparameters" in argv:
+        return
+    folder = _option(argv, "-f", "--log-folder", default="logs")
+    model_path, log_path = _model_path(["--algo", "swirl_dqn", "-f", str(folder)], env_id)
+    task = _saved_task(model_path)
+    params = Path(log_path) / env_id.replace("/", "-")
+    if params.is_dir():
+        task.to_json(params / "task.json")
+
+
+def _saved_task(model_path: str) -> TaskModel:
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    data, _, _ = load_from_zip_file(model_path, load_data=True, device="cpu")
+    if not data or not data.get("task_json"):
+        raise ValueError(f"{model_path} holds no SWIRL task (not a SwirlDQN model?)")
+    return TaskModel.from_json(data["task_json"])
+
+
+def _enjoy(argv: list[str]) -> None:
+    from rl_zoo3.enjoy import enjoy
+
+    if _option(argv, "--algo") != "swirl_dqn":
+        _run(enjoy, "enjoy", argv)
+        return
+    env_id = str(_option(argv, "--env", default="CartPole-v1"))
+    if _option(argv, "-f", "--folder") is None:
+        argv = [*argv, "-f", "logs"]  # rl_zoo3 downloads from the hub otherwise
+    model_path, _ = _model_path(argv, env_id)
+    task = _saved_task(model_path)
+    print(f"sb3-swirl: the model's task, {task.n_segments} segments", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "task.json"
+        task.to_json(path)
+        os.environ[TASK_FILE_ENV] = os.fspath(path)
+        try:
+            _run(enjoy, "enjoy", argv)
+        finally:
+            del os.environ[TASK_FILE_ENV]
+
+
+def _run(function: Any, name: str, argv: list[str]) -> None:
+    saved = sys.argv
+    sys.argv = [f"sb3-swirl zoo {name}", *argv]
+    try:
+        function()
+    finally:
+        sys.argv = saved
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``sb3-swirl zoo SCRIPT [rl_zoo3's arguments]``: SCRIPT is ``train``, ``enjoy``,
+    ``plot_train``, ``all_plots`` or ``plot_from_file``."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    scripts = ("train", "enjoy", "plot_train", "all_plots", "plot_from_file")
+    if not argv or argv[0] not in scripts:
+        print(f"usage: sb3-swirl zoo {{{','.join(scripts)}}} [rl_zoo3 arguments, see -h]")
+        return 0 if argv[:1] in (["-h"], ["--help"]) else 2
+    import sb3_swirl  # noqa: F401  (registers the sb3_swirl/ envs)
+
+    register()
+    script, rest = argv[0], argv[1:]
+    if script == "train":
+        return _train(rest)
+    if script == "enjoy":
+        _enjoy(rest)
+    else:
+        from rl_zoo3 import plots
+
+        _run(getattr(plots, script), script, rest)
+    return 0
+
+
+if __name__ == "__main__":
+    # `python -m sb3_swirl.zoo`: run the imported module's main, so that the configs'
+    # `sb3_swirl.zoo.SwirlTaskWrapper` and the registered sampler share one module state
+    from sb3_swirl.zoo import main as _main
+
+    sys.exit(_main())

@@ -1,0 +1,262 @@
+"""rl_zoo3 with swirl_dqn: `sb3-swirl zoo train/enjoy`, YAML-described SWIRL runs, -optimize,
+TensorBoard and the zoo's plots, on tiny budgets."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import yaml
+
+pytest.importorskip("rl_zoo3")
+
+import sb3_swirl
+from sb3_swirl import zoo
+
+ROOT = Path(__file__).resolve().parents[1]
+PARKING = "sb3_swirl/ParallelParking-v0"
+CLI = [sys.executable, "-m", "sb3_swirl.cli", "zoo"]
+
+
+def _run(args: list[str], cwd: Path) -> str:
+    result = subprocess.run(
+        [*CLI, *args], cwd=cwd, capture_output=True, text=True, timeout=600, check=False
+    )
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    return result.stdout
+
+
+def _mountaincar_demos(path: Path, n: int = 10) -> None:
+    """Demos of the energy-pumping policy (push the way the car moves), which reaches the goal."""
+    env = gym.make("MountainCar-v0")
+    demos = []
+    for seed in range(n):
+        obs, _ = env.reset(seed=seed)
+        states, actions, done, terminated = [obs], [], False, False
+        while not done:
+            action = 2 if obs[1] >= 0 else 0
+            obs, _, terminated, truncated, _ = env.step(action)
+            states.append(obs)
+            actions.append(action)
+            done = terminated or truncated
+        assert terminated
+        demos.append(sb3_swirl.Demonstration(np.array(states), np.array(actions)))
+    sb3_swirl.save_demos(demos, path)
+
+
+MOUNTAINCAR_ENTRY = {
+    "n_timesteps": 1500,
+    "policy": "MlpPolicy",
+    "policy_kwargs": "dict(net_arch=[64, 64])",
+    "env_wrapper": [
+        {
+            "sb3_swirl.zoo.SwirlTaskWrapper": {
+                "demos": "mountaincar_demos.npz",
+                "reward_config": {"mode": "potential", "task_reward_weight": 10.0},
+            }
+        }
+    ],
+    "learning_rate": 0.0003,
+    "learning_starts": 200,
+    "batch_size": 64,
+    "exploration_initial_eps": 0.1,
+    "exploration_final_eps": 0.02,
+    "target_update_interval": 500,
+    "prefill_replay": True,
+}
+
+
+def test_rl_zoo3_is_the_pinned_version():
+    import rl_zoo3
+
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert (
+        f"rl_zoo3[plots]=={zoo.RL_ZOO3_VERSION}"
+        in pyproject["project"]["optional-dependencies"]["zoo"]
+    )
+    assert rl_zoo3.__version__ == zoo.RL_ZOO3_VERSION
+
+
+def test_register_adds_swirl_dqn_to_the_zoo_tables():
+    from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
+    from rl_zoo3.utils import ALGOS
+
+    zoo.register()
+    assert ALGOS["swirl_dqn"] is sb3_swirl.SwirlDQN
+    assert HYPERPARAMS_SAMPLER["swirl_dqn"] is zoo.sample_swirl_dqn_params
+    assert HYPERPARAMS_CONVERTER["swirl_dqn"] is zoo.convert_swirl_dqn_params
+
+
+@pytest.mark.parametrize("algo", ["swirl_dqn", "dqn"])
+def test_shipped_configs_cover_every_registered_task(algo):
+    from sb3_swirl.supervisors import SUPERVISORS
+
+    entries = yaml.safe_load(zoo.shipped_config(algo).read_text())
+    ours = {env_id for env_id in gym.registry if env_id.startswith("sb3_swirl/")}
+    assert ours <= set(entries) and "default" in entries
+    if algo == "swirl_dqn":  # every entry's demos: a supervisor we ship, or a file
+        for env_id in ours:
+            spec = entries[env_id]["env_wrapper"][0]["sb3_swirl.zoo.SwirlTaskWrapper"]
+            assert spec["demos"]["n_demos"] >= 2 and env_id in SUPERVISORS
+            assert spec["reward_config"]["gamma"] == entries[env_id]["gamma"]
+
+
+def test_train_enjoy_tensorboard_and_plots_swirl_dqn_and_dqn(tmp_path):
+    """The zoo's log folders (config, model, task), true-reward evaluations, swirl/ keys in
+    TensorBoard, enjoy with the segment shown, and rl_zoo3's plots of both algorithms."""
+    common = ["--env", PARKING, "-f", "logs", "-n", "2000", "--eval-freq", "1000"]
+    common += ["--eval-episodes", "3"]
+    _run(["train", "--algo", "swirl_dqn", "-tb", "tb", *common], tmp_path)
+    # a second seed of each: the zoo's plots aggregate over runs
+    _run(["train", "--algo", "swirl_dqn", "--seed", "1", *common], tmp_path)
+    for seed in ("0", "1"):
+        _run(["train", "--algo", "dqn", "--seed", seed, *common], tmp_path)
+
+    run = tmp_path / "logs/swirl_dqn/sb3_swirl-ParallelParking-v0_1"
+    params = run / "sb3_swirl-ParallelParking-v0"
+    for name in ("config.yml", "args.yml", "task.json"):
+        assert (params / name).is_file(), name
+    model = sb3_swirl.SwirlDQN.load(run / "sb3_swirl-ParallelParking-v0.zip", device="cpu")
+    task = sb3_swirl.TaskModel.from_json(params / "task.json")
+    assert model.task.to_json() == task.to_json() and task.n_segments >= 2
+    config = yaml.load((params / "config.yml").read_text(), Loader=yaml.UnsafeLoader)
+    assert dict(config)["prefill_replay"] is True
+
+    # evaluations score the true reward (parking's is 1 on success, else 0), not the proxy one
+    evaluations = np.load(run / "evaluations.npz")
+    assert set(np.unique(evaluations["results"])) <= {0.0, 1.0}
+    assert evaluations["successes"][-1].mean() > 0  # the cloned and trained agent parks
+
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    (events,) = (tmp_path / "tb").glob("*/SwirlDQN_1")
+    accumulator = EventAccumulator(str(events))
+    accumulator.Reload()
+    scalars = set(accumulator.Tags()["scalars"])
+    assert {"swirl/final_segment_mean", "swirl/reach_rate_seg0", "bc/accuracy"} <= scalars
+
+    enjoy = ["--env", PARKING, "-f", "logs", "-n", "210", "--no-render"]  # > one episode
+    out = _run(["enjoy", "--algo", "swirl_dqn", *enjoy], tmp_path)
+    assert f"the model's task, {task.n_segments} segments" in out
+    assert re.search(r"step \d+: segment 1 \(of 0-", out)
+    assert "true return" in out
+    assert "Episode Length" in _run(["enjoy", "--algo", "dqn", *enjoy], tmp_path)
+
+    plots = ["all_plots", "-a", "swirl_dqn", "dqn", "-e", "ParallelParking-v0", "-f", "logs"]
+    _run([*plots, "--no-display", "-o", "curves", "-k", "results"], tmp_path)
+    _run(["plot_from_file", "-i", "curves.pkl", "-o", "curves.png", "--format", "png"], tmp_path)
+    assert (tmp_path / "curves.png").stat().st_size > 1000
+
+
+def test_yaml_for_a_plain_gymnasium_env_with_a_demo_file(tmp_path, monkeypatch):
+    """MountainCar (no supervisor of ours): 10 demos from a file, SwirlDQN through the zoo."""
+    monkeypatch.chdir(tmp_path)
+    _mountaincar_demos(tmp_path / "mountaincar_demos.npz")
+    (tmp_path / "mine.yml").write_text(yaml.safe_dump({"MountainCar-v0": MOUNTAINCAR_ENTRY}))
+    args = ["train", "--algo", "swirl_dqn", "--env", "MountainCar-v0", "-conf", "mine.yml"]
+    assert zoo.main([*args, "-f", "logs", "--eval-freq", "1500", "--eval-episodes", "3"]) == 0
+    evaluations = np.load(tmp_path / "logs/swirl_dqn/MountainCar-v0_1/evaluations.npz")
+    # plain DQN rarely reaches the flag in 1500 steps; the cloned agent does (true reward)
+    assert evaluations["ep_lengths"][-1].max() < 200
+    assert evaluations["results"][-1].mean() > -200
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"learning_rat": 0.001}, "unknown key 'learning_rat' (did you mean 'learning_rate'?)"),
+        ({"demos": "missing.npz"}, "demos: file 'missing.npz' not found"),
+        ({"fitt": {}}, "SwirlTaskWrapper: unknown key 'fitt' (did you mean 'fit'?)"),
+        ({"fit": {"reg_covr": 0.1}}, "unexpected keyword arguments ['reg_covr']"),
+        ({"demos": {"n_demos": 3}}, "MountainCar-v0 ships no supervisor"),
+        ({"env": "CartPole-v1"}, "observations have 2 dims, but CartPole-v1's observations have 4"),
+        ({"env_wrapper": None}, "swirl_dqn needs the SWIRL task"),
+    ],
+)
+def test_bad_yaml_fails_before_training_naming_the_problem(
+    tmp_path, monkeypatch, capsys, change, message
+):
+    monkeypatch.chdir(tmp_path)
+    _mountaincar_demos(tmp_path / "mountaincar_demos.npz", n=2)
+    entry = dict(MOUNTAINCAR_ENTRY)
+    change = dict(change)
+    env_id = change.pop("env", "MountainCar-v0")
+    spec = dict(entry["env_wrapper"][0]["sb3_swirl.zoo.SwirlTaskWrapper"])
+    for key, value in change.items():
+        if key in ("demos", "fit", "fitt"):
+            spec[key] = value
+        else:
+            entry[key] = value
+    if entry.get("env_wrapper"):
+        entry["env_wrapper"] = [{"sb3_swirl.zoo.SwirlTaskWrapper": spec}]
+    (tmp_path / "bad.yml").write_text(yaml.safe_dump({env_id: entry}))
+    args = ["train", "--algo", "swirl_dqn", "--env", env_id, "-conf", "bad.yml", "-f", "logs"]
+    assert zoo.main(args) == 2
+    err = capsys.readouterr().err
+    assert message in err and "bad.yml" in err
+    assert not (tmp_path / "logs").exists()  # nothing started
+
+
+def test_optimize_two_trials_writes_the_study(tmp_path):
+    args = [
+        "train",
+        "--algo",
+        "swirl_dqn",
+        "--env",
+        PARKING,
+        "-f",
+        "logs",
+        "-n",
+        "400",
+        "--seed",
+        "0",
+    ]
+    args += ["-optimize", "--n-trials", "2", "--n-evaluations", "1", "--eval-episodes", "2"]
+    _run([*args, "--no-optim-plots", "--sampler", "random", "--pruner", "none"], tmp_path)
+    (report,) = (tmp_path / "logs/swirl_dqn").glob("report_*.csv")
+    text = report.read_text()
+    assert "params_reg_covar" in text and "params_bc_epochs" in text
+    assert len(text.strip().splitlines()) == 3  # header + 2 trials
+
+
+def test_a_trials_swirl_settings_reach_the_wrapper_and_the_agent():
+    """The sampled reg_covar and gamma reach the wrapper (the fit, the shaping) and the demos
+    the wrapper loaded reach SwirlDQN."""
+    import optuna
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    trial = optuna.trial.FixedTrial(
+        {
+            "one_minus_gamma": 0.02,
+            "batch_size_pow": 5,
+            "learning_rate": 1e-3,
+            "train_freq": 4,
+            "subsample_steps": 2,
+            "exploration_final_eps": 0.05,
+            "exploration_fraction": 0.2,
+            "target_update_interval": 100,
+            "net_arch": "small",
+            "reg_covar": 0.05,
+            "task_reward_weight": 3.0,
+            "bc_epochs": 0,
+            "demo_loss_coef": 0.5,
+        }
+    )
+    try:
+        params = zoo.sample_swirl_dqn_params(trial, 0, 1, {"using_her_replay_buffer": False})
+        assert "reg_covar" not in params and params["bc_epochs"] == 0
+        env = DummyVecEnv([lambda: zoo.SwirlTaskWrapper(gym.make(PARKING), demos={"n_demos": 3})])
+    finally:
+        zoo._TRIAL.__dict__.clear()
+    config = env.get_attr("reward_config")[0]
+    assert config.gamma == pytest.approx(0.98) and config.task_reward_weight == 3.0
+    task = env.get_attr("task")[0]
+    assert task.metadata["segmentation"]["params"]["reg_covar"] == 0.05
+    model = sb3_swirl.SwirlDQN("MlpPolicy", env, **params)
+    assert len(model.demonstrations) == 3
