@@ -442,16 +442,18 @@ def _option(argv: list[str], *names: str, default: str | None = None) -> str | N
 
 def _train(argv: list[str]) -> int:
     from rl_zoo3.train import train
+    from rl_zoo3.utils import ALGOS
 
-    algo = _option(argv, "--algo", default="ppo")
+    algo = str(_option(argv, "--algo", default="ppo"))
     env_id = _option(argv, "--env", default="CartPole-v1")
     config = _option(argv, "-conf", "--conf-file")
-    if config is None and (algo == "swirl_dqn" or str(env_id).startswith("sb3_swirl/")):
-        config = os.fspath(shipped_config(str(algo)))
-        if Path(config).is_file():
-            argv = [*argv, "--conf-file", config]
-            print(f"sb3-swirl: hyperparameters from {config}", flush=True)
-    if config is not None and algo in _algos():
+    shipped = shipped_config(algo)
+    ours = algo == "swirl_dqn" or str(env_id).startswith("sb3_swirl/")
+    if config is None and ours and shipped.is_file():
+        config = os.fspath(shipped)
+        argv = [*argv, "--conf-file", config]
+        print(f"sb3-swirl: hyperparameters from {config}", flush=True)
+    if config is not None and algo in ALGOS:
         try:
             if (
                 algo == "swirl_dqn"
@@ -463,7 +465,7 @@ def _train(argv: list[str]) -> int:
                     "task_reward_weight) would not reach the sub-processes; use the default "
                     "--vec-env dummy (Optuna's --n-jobs runs trials in parallel)"
                 )
-            check_config(str(algo), str(env_id), config, _custom_hyperparams(argv))
+            check_config(algo, str(env_id), config, _custom_hyperparams(argv))
         except ValueError as exc:  # before anything trains: one clear line, no traceback
             print(f"error: {exc}", file=sys.stderr)
             return 2
@@ -482,12 +484,6 @@ def _custom_hyperparams(argv: list[str]) -> dict[str, Any]:
     parser = argparse.ArgumentParser(add_help=False)
     parser.add_argument("-params", "--hyperparams", nargs="+", action=StoreDict, default={})
     return dict(parser.parse_known_args(argv)[0].hyperparams or {})
-
-
-def _algos() -> dict[str, Any]:
-    from rl_zoo3.utils import ALGOS
-
-    return ALGOS
 
 
 def _model_path(argv: list[str], env_id: str) -> tuple[str, str]:
@@ -514,7 +510,9 @@ def _write_task(argv: list[str], env_id: str) -> None:
     folder = _option(argv, "-f", "--log-folder", default="logs")
     model_path, log_path = _model_path(["--algo", "swirl_dqn", "-f", str(folder)], env_id)
     task = _saved_task(model_path)
-    params = Path(log_path) / env_id.replace("/", "-")
+    from huggingface_sb3 import EnvironmentName
+
+    params = Path(log_path) / str(EnvironmentName(env_id))
     if params.is_dir():
         task.to_json(params / "task.json")
 
@@ -528,17 +526,21 @@ def _saved_task(model_path: str) -> TaskModel:
     return TaskModel.from_json(data["task_json"])
 
 
-def _enjoy(argv: list[str]) -> None:
+def _enjoy(argv: list[str]) -> int:
     from rl_zoo3.enjoy import enjoy
 
     if _option(argv, "--algo") != "swirl_dqn":
         _run(enjoy, "enjoy", argv)
-        return
+        return 0
     env_id = str(_option(argv, "--env", default="CartPole-v1"))
     if _option(argv, "-f", "--folder") is None:
-        argv = [*argv, "-f", "logs"]  # rl_zoo3 downloads from the hub otherwise
-    model_path, _ = _model_path(argv, env_id)
-    task = _saved_task(model_path)
+        argv = [*argv, "-f", "logs"]  # rl_zoo3 would look on the hub, which has no swirl_dqn
+    try:
+        model_path, _ = _model_path(argv, env_id)
+        task = _saved_task(model_path)
+    except (AssertionError, ValueError) as exc:  # no such run or model
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     print(f"sb3-swirl: the model's task, {task.n_segments} segments", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "task.json"
@@ -548,6 +550,7 @@ def _enjoy(argv: list[str]) -> None:
             _run(enjoy, "enjoy", argv)
         finally:
             del os.environ[TASK_FILE_ENV]
+    return 0
 
 
 def _run(function: Any, name: str, argv: list[str]) -> None:
@@ -574,11 +577,10 @@ def main(argv: list[str] | None = None) -> int:
     if script == "train":
         return _train(rest)
     if script == "enjoy":
-        _enjoy(rest)
-    else:
-        from rl_zoo3 import plots
+        return _enjoy(rest)
+    from rl_zoo3 import plots
 
-        _run(getattr(plots, script), script, rest)
+    _run(getattr(plots, script), script, rest)
     return 0
 
 
