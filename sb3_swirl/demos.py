@@ -224,6 +224,41 @@ _RATE_FACTOR = 3.0
 _ABSURD_FACTOR = 1e6
 
 
+def check_demos_fit_spaces(
+    demos: Sequence[Demonstration],
+    state_dim: int,
+    n_actions: int | None,
+    source: str,
+    env_note: str,
+    hint: str = "",
+) -> None:
+    """Raise unless every demo has ``state_dim`` observation dims and, where ``n_actions`` is
+    given (a ``Discrete`` action space), integer actions in ``0 .. n_actions - 1``.
+
+    Messages read ``"{source} {n}: observations have 3 dims, {env_note} have 4{hint}"``.
+    """
+    for n, demo in enumerate(demos):
+        if demo.observations.shape[1] != state_dim:
+            raise ValueError(
+                f"{source} {n}: observations have {demo.observations.shape[1]} dims, {env_note} "
+                f"have {state_dim}{hint}"
+            )
+        if demo.actions is None or n_actions is None:
+            continue
+        actions = np.asarray(demo.actions)
+        if actions.ndim != 1 or not np.all(actions == np.round(actions)):
+            raise ValueError(
+                f"{source} {n}: actions must be integers of shape ({len(demo)},) "
+                f"for the Discrete({n_actions}) action space, got shape {actions.shape}"
+            )
+        if actions.size and (actions.min() < 0 or actions.max() >= n_actions):
+            raise ValueError(
+                f"{source} {n}: actions must lie in the action space Discrete("
+                f"{n_actions}), i.e. 0 .. {n_actions - 1}; got values in "
+                f"[{actions.min():g}, {actions.max():g}]"
+            )
+
+
 def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
     """Check that demonstrations look like samples of one task at one rate.
 

@@ -14,7 +14,7 @@ from stable_baselines3.common.type_aliases import GymEnv, Schedule
 from stable_baselines3.dqn.policies import DQNPolicy
 from torch.nn import functional as F
 
-from sb3_swirl.demos import Demonstration, as_demonstrations
+from sb3_swirl.demos import Demonstration, as_demonstrations, check_demos_fit_spaces
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.inverse_dynamics import InverseDynamics
 from sb3_swirl.vec_env import get_swirl_attr
@@ -234,29 +234,15 @@ class SwirlDQN(DQN):
         assert task is not None
         if not isinstance(space, spaces.Box) or len(space.shape) != 1:
             raise ValueError(f"SwirlDQN's demonstrations need a flat Box observation, got {space}")
-        state_dim = space.shape[0] - task.n_indices
-        n_actions = int(self.action_space.n)  # type: ignore[attr-defined]
-        for n, demo in enumerate(self.demonstrations):
-            if demo.observations.shape[1] != state_dim:
-                raise ValueError(
-                    f"demonstration {n}: observations have {demo.observations.shape[1]} dims, "
-                    f"the environment's (unlifted) observations have {state_dim} (demos must be "
-                    "states of the env under the SWIRL wrapper; frame stacking is not supported)"
-                )
-            if demo.actions is None:
-                continue
-            actions = np.asarray(demo.actions)
-            if actions.ndim != 1 or not np.all(actions == np.round(actions)):
-                raise ValueError(
-                    f"demonstration {n}: actions must be integers of shape ({len(demo)},) "
-                    f"for the Discrete({n_actions}) action space, got shape {actions.shape}"
-                )
-            if actions.min() < 0 or actions.max() >= n_actions:
-                raise ValueError(
-                    f"demonstration {n}: actions must lie in the action space Discrete("
-                    f"{n_actions}), i.e. 0 .. {n_actions - 1}; got values in "
-                    f"[{actions.min():g}, {actions.max():g}]"
-                )
+        check_demos_fit_spaces(
+            self.demonstrations,
+            space.shape[0] - task.n_indices,
+            int(self.action_space.n),  # type: ignore[attr-defined]
+            "demonstration",
+            "the environment's (unlifted) observations",
+            " (demos must be states of the env under the SWIRL wrapper; frame stacking is not "
+            "supported)",
+        )
 
     def _setup_model(self) -> None:
         if self.task_json is not None and (

@@ -44,7 +44,7 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-from sb3_swirl.demos import Demonstration, load_demos
+from sb3_swirl.demos import Demonstration, check_demos_fit_spaces, load_demos
 from swirl_wrappers import SwirlWrapper, TaskModel
 
 __all__ = ["RL_ZOO3_VERSION", "SwirlTaskWrapper", "check_config", "main", "register"]
@@ -94,10 +94,6 @@ def _check_keys(where: str, given: Mapping[str, Any], allowed: Any) -> None:
             )
 
 
-def _flat_dim(space: gym.Space) -> int:
-    return int(np.prod(space.shape)) if space.shape is not None else -1
-
-
 def _load_demos(spec: Any, env: gym.Env, seed: int) -> tuple[list[Demonstration], str]:
     """The demos of a ``demos:`` value and a description for messages."""
     if isinstance(spec, str | os.PathLike):
@@ -137,22 +133,16 @@ def _check_demos_fit_env(
     space = env.observation_space
     if state_key is not None and isinstance(space, gym.spaces.Dict):
         space = space[state_key]
-    dim = _flat_dim(space)
-    n_actions = getattr(env.action_space, "n", None)
-    for i, demo in enumerate(demos):
-        if demo.observations.shape[1] != dim:
-            raise ValueError(
-                f"{source}, demo {i}: observations have {demo.observations.shape[1]} dims, "
-                f"but {env.spec.id if env.spec else 'the env'}'s observations have {dim} "
-                f"({space})"
-            )
-        if demo.actions is not None and n_actions is not None:
-            actions = np.asarray(demo.actions)
-            if actions.size and (actions.min() < 0 or actions.max() >= n_actions):
-                raise ValueError(
-                    f"{source}, demo {i}: actions range over [{actions.min():g}, "
-                    f"{actions.max():g}], outside the env's {env.action_space}"
-                )
+    name = env.spec.id if env.spec is not None else "the env"
+    discrete = isinstance(env.action_space, gym.spaces.Discrete)
+    check_demos_fit_spaces(
+        demos,
+        int(np.prod(space.shape)),
+        int(env.action_space.n) if discrete else None,  # type: ignore[attr-defined]
+        f"{source}, demo",
+        f"but {name}'s observations",
+        f" ({space})",
+    )
 
 
 def _fitted_task(
