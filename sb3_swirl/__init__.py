@@ -39,7 +39,7 @@ from sb3_swirl.plotting import (
     plot_sheet,
     plot_transitions,
 )
-from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
+from sb3_swirl.rewards import MaxEntIRLRewardLearner, QuadraticRewardLearner, RewardLearner
 from sb3_swirl.segmentation import (
     SegmentationWarning,
     TransitionStateClustering,
@@ -57,6 +57,7 @@ __all__ = [
     "DemoWarning",
     "Demonstration",
     "InverseDynamics",
+    "MaxEntIRLRewardLearner",
     "NoisyAcrobotEnv",
     "ParallelParkingEnv",
     "QuadraticRewardLearner",

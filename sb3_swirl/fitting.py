@@ -11,12 +11,18 @@ import numpy as np
 from sklearn.base import clone
 
 from sb3_swirl.demos import Demonstration, as_demonstrations
-from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner
+from sb3_swirl.rewards import MaxEntIRLRewardLearner, QuadraticRewardLearner, RewardLearner
 from sb3_swirl.segmentation import TransitionStateClustering
 from swirl_wrappers import TaskModel
 from swirl_wrappers.task import angle_features, check_angles
 
 Progress = Callable[[str], None]
+
+#: ``fit_task(reward=NAME)``: the reward learners by name
+REWARD_LEARNERS: dict[str, type[RewardLearner]] = {
+    "quadratic": QuadraticRewardLearner,
+    "maxent": MaxEntIRLRewardLearner,
+}
 
 
 def _jsonable(value: Any) -> Any:
@@ -70,7 +76,7 @@ def fit_task(
     dims: Any = None,
     angles: Any = None,
     segmentation: TransitionStateClustering | dict[str, Any] | None = None,
-    reward: RewardLearner | dict[str, Any] | None = None,
+    reward: RewardLearner | dict[str, Any] | str | None = None,
     random_state: int | None = None,
     progress: Progress | bool | None = None,
     **kwargs: Any,
@@ -95,9 +101,11 @@ def fit_task(
         gives the absolute link angles, in which the tip height is linear.
     segmentation : TransitionStateClustering or dict, optional
         The segmenter (cloned before fitting) or its keyword arguments.
-    reward : RewardLearner or dict, optional
-        The reward learner (cloned) or keyword arguments of
-        :class:`~sb3_swirl.rewards.QuadraticRewardLearner`.
+    reward : RewardLearner, dict or {"quadratic", "maxent"}, optional
+        The reward learner (cloned), keyword arguments of the model-free
+        :class:`~sb3_swirl.rewards.QuadraticRewardLearner`, or a learner by name:
+        ``"maxent"`` is :class:`~sb3_swirl.rewards.MaxEntIRLRewardLearner` (model-based, needs
+        demos with actions; ``dynamics=model`` gives it a known model).
     random_state : int, optional
         Seed of the segmenter (overrides its own ``random_state`` when given).
     progress : callable or bool, optional
@@ -129,7 +137,12 @@ def fit_task(
     report: Progress = progress if callable(progress) else (lambda message: None)
 
     seg_params = set(inspect.signature(TransitionStateClustering).parameters)
-    reward_cls = type(reward) if isinstance(reward, RewardLearner) else QuadraticRewardLearner
+    if isinstance(reward, str):
+        if reward not in REWARD_LEARNERS:
+            raise ValueError(f"reward must be one of {sorted(REWARD_LEARNERS)}, got {reward!r}")
+        reward_cls, reward = REWARD_LEARNERS[reward], None
+    else:
+        reward_cls = type(reward) if isinstance(reward, RewardLearner) else QuadraticRewardLearner
     reward_params = set(inspect.signature(reward_cls).parameters)
     unknown = set(kwargs) - seg_params - reward_params
     if unknown:
@@ -146,7 +159,7 @@ def fit_task(
     )
     learner = _build(
         reward,
-        QuadraticRewardLearner,
+        reward_cls,
         {k: v for k, v in kwargs.items() if k in reward_params and k not in seg_params},
         "reward",
         RewardLearner,

@@ -4,15 +4,16 @@ Every reward learner follows the :class:`RewardLearner` protocol: hyperparameter
 ``__init__``, ``fit(demos, segmentation)`` learns ``rewards_``, a list of
 :class:`swirl_wrappers.QuadraticReward` (one per segment, segment ``i`` leading to region ``i``).
 :func:`segment_states` cuts the demonstrations into segments with the same Markov segmentation
-function the runtime uses, so any learner (the model-free one here, MaxEnt-IRL ones later) sees
-exactly the segments an agent will be rewarded on.
+function the runtime uses (:func:`segment_transitions` with the actions), so every learner (the
+model-free :class:`QuadraticRewardLearner`, the model-based :class:`MaxEntIRLRewardLearner`)
+sees exactly the segments an agent will be rewarded on.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Sequence
-from numbers import Real
+from numbers import Integral, Real
 from typing import Any, ClassVar
 
 import numpy as np
@@ -96,8 +97,9 @@ def segment_states(
 class RewardLearner(BaseEstimator, ABC):
     """Protocol of the reward learners: ``fit(demos, segmentation)`` sets ``rewards_``.
 
-    Subclasses (the model-free :class:`QuadraticRewardLearner`; MaxEnt-IRL learners for fully
-    observed demonstrations) implement :meth:`fit` and may use :func:`segment_states`.
+    Subclasses (the model-free :class:`QuadraticRewardLearner`; :class:`MaxEntIRLRewardLearner`
+    for demonstrations with actions) implement :meth:`fit` and may use :func:`segment_states`
+    or :func:`segment_transitions`.
     """
 
     rewards_: list[QuadraticReward]
@@ -208,3 +210,354 @@ class QuadraticRewardLearner(StrictParamsMixin, RewardLearner):
         self.rewards_ = rewards
         self.segment_sizes_ = sizes
         return self
+
+
+def segment_transitions(
+    demos: Sequence[Demonstration],
+    segmentation: Any,
+    features: RBFFeatures | None = None,
+) -> tuple[list[dict[str, np.ndarray]], list[Region]]:
+    """The demonstrated transitions ``(s_t, a_t, s_{t+1})`` of every segment.
+
+    A transition belongs to the segment of its first state (the same Markov segmentation as
+    :func:`segment_states`). Demonstrations need actions.
+
+    Returns
+    -------
+    transitions : list (per segment) of dicts with ``states`` and ``next_states`` (the demos'
+        own rows, shape (n, d)), ``x`` and ``next_x`` (their task-space features, (n, p)) and
+        ``actions`` ((n,) or (n, m)); empty arrays for a segment no demo entered
+    regions : list of Region
+    """
+    regions, featurize = _resolve(segmentation, features)
+    parts: list[list[tuple[np.ndarray, ...]]] = [[] for _ in regions]
+    for demo in demos:
+        x = featurize(demo.observations)
+        bounds = segment_boundaries(x, regions)
+        label = np.full(len(x), -1)
+        start = 0
+        for j, b in enumerate(bounds):
+            end = len(x) if b < 0 else int(b) + 1
+            label[start:end] = j
+            if b < 0:
+                break
+            start = end
+        actions = np.asarray(demo.actions)
+        for j in range(len(regions)):
+            t = np.flatnonzero(label[:-1] == j)
+            obs = demo.observations
+            parts[j].append((obs[t], obs[t + 1], x[t], x[t + 1], actions[t]))
+    out = []
+    for seg in parts:
+        names = ("states", "next_states", "x", "next_x", "actions")
+        out.append({n: np.concatenate([p[i] for p in seg]) for i, n in enumerate(names)})
+    return out, regions
+
+
+class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
+    """Model-based local rewards by maximum-entropy IRL on each segment (§6.2).
+
+    For segment ``i`` the reward is ``R_i(x) = -(x - mu_i)^T Psi_i (x - mu_i)``, ``mu_i`` the
+    centre of region ``i`` (as in :class:`QuadraticRewardLearner`) and ``Psi_i = L L^T +
+    floor`` positive semi-definite by construction, fitted by maximising the likelihood of the
+    demonstrated actions under the soft-optimal (maximum causal entropy) policy of the
+    segment's dynamics. That is MaxEnt IRL's maximum-likelihood problem: the dynamics terms of a
+    trajectory's log-probability do not depend on the reward. The dynamics are a linear model
+    ``x' = A x + B u + c`` fitted by least squares on the segment's transitions (§6.2.2), or the
+    known model ``dynamics`` (Fig. 5, "the benefit of models").
+
+    * **Continuous actions** (2-D float action arrays): the action cost ``u^T R u`` with
+      ``R = action_cost * I`` is fixed (it sets the scale of ``Psi``) and the problem is a
+      soft LQR: a discounted Riccati recursion on ``(x, 1)`` gives the Gaussian policy
+      ``u ~ N(-K (x, 1), (2 (R + gamma B^T P B))^-1)``. ``dynamics`` is then a linear model
+      ``(A, B)`` or ``(A, B, c)`` in task space.
+    * **Discrete actions** (integer actions): soft value iteration with a quadratic value
+      function fitted by least squares on the segment's states, ``Q(x, a) = R_i(x) + gamma
+      V(x'_a)`` and ``pi(a | x) = softmax_a Q(x, a)``; ``x'_a`` comes from the linear model
+      (``B`` acting on the one-hot action) or from ``dynamics(state, action) -> next state``,
+      called on the demonstrations' own rows (the states ``fit`` is given).
+
+    Parameters
+    ----------
+    gamma : float, default 0.9
+        Discount of the soft Bellman recursion (the horizon a segment's demonstrator plans for).
+    action_cost : float, default 1.0
+        ``R = action_cost * I`` (continuous actions only).
+    dynamics : callable or tuple, optional
+        The known model (see above); ``None`` estimates a linear model per segment.
+    max_iter : int, default 100
+        L-BFGS iterations (strong Wolfe line search) on the likelihood.
+    n_value_iterations : int, default 60
+        Soft Bellman iterations per likelihood evaluation (discrete actions; the Riccati
+        recursion of the continuous case runs as many).
+    regularization : float, default 1e-3
+        Floor added to ``Psi`` (relative to the inverse variance of the segment's states along
+        each axis) and ridge of the linear model's least squares.
+    weight_decay : float, default 1e-3
+        Penalty ``weight_decay * ||S Psi S||_F^2`` with ``S`` the segment states' standard
+        deviations (unit-free): where a segment's demonstrations are deterministic, the
+        likelihood grows without bound with the scale of ``Psi``, and this keeps it finite.
+    normalize : bool, default True
+        Scale each ``Psi_i`` so the mean reward over the segment's demonstration states is
+        ``-1``, the scale of :class:`QuadraticRewardLearner` (the shape of ``Psi_i`` is the
+        MaxEnt estimate; ``raw_scales_`` keeps the factor).
+    random_state : int, optional
+        Not used: the fit is deterministic (the parameter keeps ``fit_task``'s interface).
+
+    Attributes
+    ----------
+    rewards_ : list of QuadraticReward
+    segment_sizes_ : list of int
+        Demonstrated transitions per segment.
+    log_likelihoods_ : list of float
+        Mean log-likelihood of the demonstrated actions per segment at the optimum.
+    raw_scales_ : list of float
+        The factor ``normalize`` divided each ``Psi_i`` by (1 without it).
+    """
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "gamma": [Interval(Real, 0, 1, closed="left")],
+        "action_cost": [Interval(Real, 0, np.inf, closed="neither")],
+        "dynamics": [callable, tuple, None],
+        "max_iter": [Interval(Integral, 1, None, closed="left")],
+        "n_value_iterations": [Interval(Integral, 1, None, closed="left")],
+        "regularization": [Interval(Real, 0, np.inf, closed="neither")],
+        "weight_decay": [Interval(Real, 0, np.inf, closed="left")],
+        "normalize": ["boolean"],
+        "random_state": ["random_state"],
+    }
+
+    def __init__(
+        self,
+        gamma: float = 0.9,
+        action_cost: float = 1.0,
+        dynamics: Callable[[np.ndarray, Any], np.ndarray] | tuple | None = None,
+        max_iter: int = 100,
+        n_value_iterations: int = 60,
+        regularization: float = 1e-3,
+        weight_decay: float = 1e-3,
+        normalize: bool = True,
+        random_state: int | None = None,
+    ) -> None:
+        self.gamma = gamma
+        self.action_cost = action_cost
+        self.dynamics = dynamics
+        self.max_iter = max_iter
+        self.n_value_iterations = n_value_iterations
+        self.regularization = regularization
+        self.weight_decay = weight_decay
+        self.normalize = normalize
+        self.random_state = random_state
+
+    def fit(
+        self, demos: Any, segmentation: Any, features: RBFFeatures | None = None
+    ) -> MaxEntIRLRewardLearner:
+        """Learn the local rewards from demonstrations *with actions*.
+
+        Raises
+        ------
+        ValueError
+            If a demonstration has no actions (MaxEnt IRL needs them; label state-only demos
+            with :class:`sb3_swirl.InverseDynamics` or use :class:`QuadraticRewardLearner`).
+        """
+        self._validate_params()
+        demos = as_demonstrations(demos)
+        for i, demo in enumerate(demos):
+            if demo.actions is None:
+                raise ValueError(
+                    f"demo {i} has no actions: MaxEnt IRL (reward='maxent', "
+                    "MaxEntIRLRewardLearner) needs states and actions; label state-only demos "
+                    "with sb3_swirl.InverseDynamics, or use the model-free reward"
+                )
+        discrete = all(np.asarray(d.actions).ndim == 1 for d in demos)
+        if discrete and not all(
+            np.all(np.asarray(d.actions) == np.round(d.actions)) for d in demos
+        ):
+            raise ValueError("1-D actions must be integers (a Discrete action space)")
+        if not discrete and self.dynamics is not None and callable(self.dynamics):
+            raise ValueError(
+                "continuous actions: dynamics must be a linear model (A, B) or (A, B, c) in "
+                "task space"
+            )
+        segments, regions = segment_transitions(demos, segmentation, features)
+        _, featurize = _resolve(segmentation, features)
+        n_actions = 1 + max(int(np.max(d.actions)) for d in demos if len(d)) if discrete else 0
+        pooled = np.concatenate([s["x"] for s in segments if len(s["x"])])
+        var = pooled.var(axis=0) + 1e-12
+        rewards, sizes, loglik, scales = [], [], [], []
+        for seg, region in zip(segments, regions, strict=True):
+            x = seg["x"] if len(seg["x"]) else pooled
+            sizes.append(len(seg["x"]))
+            if not len(seg["x"]):  # no demo entered: no evidence, an isotropic reward
+                weight, ll = np.diag(1.0 / var), float("nan")
+            elif discrete:
+                weight, ll = self._fit_discrete(seg, region.mean, n_actions, featurize, var)
+            else:
+                weight, ll = self._fit_continuous(seg, region.mean, var)
+            scale = 1.0
+            if self.normalize:
+                diff = x - region.mean
+                scale = float(np.mean(np.einsum("ij,jk,ik->i", diff, weight, diff)))
+                scale = scale if scale > 1e-12 else 1.0
+            rewards.append(QuadraticReward(target=region.mean, weight=weight / scale))
+            loglik.append(ll)
+            scales.append(scale)
+        self.rewards_ = rewards
+        self.segment_sizes_ = sizes
+        self.log_likelihoods_ = loglik
+        self.raw_scales_ = scales
+        return self
+
+    # ---------------------------------------------------------------- shared pieces
+    def _linear_model(
+        self, x: np.ndarray, u: np.ndarray, next_x: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Ridge least squares ``x' = A x + B u + c`` (§6.2.2)."""
+        design = np.hstack([x, u, np.ones((len(x), 1))])
+        scale = design.std(axis=0) + 1e-8
+        scale[-1] = 1.0
+        z = design / scale
+        # the ridge also settles actions a segment never shows (their effect estimate is 0)
+        # and the one-hot columns' collinearity with the intercept
+        ridge = self.regularization * len(x) * np.eye(z.shape[1])
+        ridge[-1, -1] = 1e-9 * len(x)
+        coef = np.linalg.solve(z.T @ z + ridge, z.T @ next_x) / scale[:, None]
+        p, m = x.shape[1], u.shape[1]
+        return coef[:p].T, coef[p : p + m].T, coef[-1]
+
+    def _optimise(
+        self, loss_of_psi: Callable[[Any], Any], x: np.ndarray, var: np.ndarray
+    ) -> tuple[np.ndarray, float]:
+        """Minimise ``loss_of_psi(Psi)`` over ``Psi = L L^T + floor`` (L-BFGS on ``L``, started
+        at the model-free estimate of the segment ``x``); ``var`` is the variance of all the
+        demonstrations' states per axis (a segment may hold an axis constant). Returns ``Psi``
+        and ``-loss``."""
+        import torch as th
+
+        p = x.shape[1]
+        cov = np.cov(x, rowvar=False).reshape(p, p) if len(x) > 1 else np.zeros((p, p))
+        start = np.linalg.inv(cov + self.regularization * np.diag(var))
+        diff = x - x.mean(axis=0)
+        start /= max(float(np.mean(np.einsum("ij,jk,ik->i", diff, start, diff))), 1e-12)
+        chol = th.tensor(np.linalg.cholesky((start + start.T) / 2), requires_grad=True)
+        floor = th.tensor(self.regularization * np.diag(1.0 / var))
+        std = th.tensor(np.sqrt(var))
+        optimiser = th.optim.LBFGS(
+            [chol], lr=1.0, max_iter=self.max_iter, line_search_fn="strong_wolfe"
+        )
+
+        def closure() -> Any:
+            optimiser.zero_grad()
+            low = th.tril(chol)
+            psi = low @ low.T + floor
+            penalty = self.weight_decay * ((std[:, None] * psi * std[None, :]) ** 2).sum()
+            loss = loss_of_psi(psi) + penalty
+            loss.backward()
+            return loss
+
+        optimiser.step(closure)
+        with th.no_grad():
+            low = th.tril(chol)
+            psi = low @ low.T + floor
+            final = float(loss_of_psi(psi))
+        weight = psi.numpy()
+        return (weight + weight.T) / 2, -final
+
+    # ---------------------------------------------------------------- continuous actions
+    def _fit_continuous(
+        self, seg: dict[str, np.ndarray], target: np.ndarray, var: np.ndarray
+    ) -> tuple[np.ndarray, float]:
+        import torch as th
+
+        x, u, nx = seg["x"], np.asarray(seg["actions"], dtype=float), seg["next_x"]
+        if self.dynamics is None:
+            a, b, c = self._linear_model(x, u, nx)
+        else:
+            a, b, *rest = (np.asarray(m, dtype=float) for m in self.dynamics)
+            c = rest[0] if rest else np.zeros(a.shape[0])
+        p, m = b.shape
+        t = lambda v: th.tensor(v, dtype=th.float64)  # noqa: E731
+        abar = t(np.block([[a, c[:, None]], [np.zeros((1, p)), np.ones((1, 1))]]))
+        bbar = t(np.vstack([b, np.zeros((1, m))]))
+        z = t(np.hstack([x, np.ones((len(x), 1))]))
+        uu, mu = t(u), t(target)
+        r = self.action_cost * th.eye(m, dtype=th.float64)
+        gamma = self.gamma
+
+        def loss(psi: Any) -> Any:
+            qbar = th.zeros((p + 1, p + 1), dtype=th.float64)
+            qbar[:p, :p] = psi
+            qbar[:p, p] = -psi @ mu
+            qbar[p, :p] = -psi @ mu
+            qbar[p, p] = mu @ psi @ mu
+            pbar = qbar
+            for _ in range(self.n_value_iterations):
+                mmat = r + gamma * bbar.T @ pbar @ bbar
+                gain = gamma * th.linalg.solve(mmat, bbar.T @ pbar @ abar)
+                pbar = qbar + gamma * abar.T @ pbar @ abar - gamma * abar.T @ pbar @ bbar @ gain
+                pbar = (pbar + pbar.T) / 2
+            mmat = r + gamma * bbar.T @ pbar @ bbar
+            gain = gamma * th.linalg.solve(mmat, bbar.T @ pbar @ abar)
+            mean = -z @ gain.T
+            precision = 2 * mmat
+            err = uu - mean
+            quad = th.einsum("ni,ij,nj->n", err, precision, err)
+            logdet = th.linalg.slogdet(precision)[1]
+            return (0.5 * quad - 0.5 * logdet).mean()
+
+        return self._optimise(loss, x, var)
+
+    # ---------------------------------------------------------------- discrete actions
+    def _fit_discrete(
+        self,
+        seg: dict[str, np.ndarray],
+        target: np.ndarray,
+        n_actions: int,
+        featurize: Callable[[np.ndarray], np.ndarray],
+        var: np.ndarray,
+    ) -> tuple[np.ndarray, float]:
+        import torch as th
+
+        x, actions = seg["x"], np.asarray(seg["actions"]).astype(int)
+        if self.dynamics is None:
+            onehot = np.eye(n_actions)[actions]
+            a, b, c = self._linear_model(x, onehot, seg["next_x"])
+            nxt = (x @ a.T + c)[:, None, :] + b.T[None, :, :]  # (n, actions, p)
+        elif callable(self.dynamics):
+            states = seg["states"]
+            raw = [[self.dynamics(s, a) for a in range(n_actions)] for s in states]
+            flat = np.asarray(raw, dtype=float).reshape(len(states) * n_actions, -1)
+            nxt = featurize(flat).reshape(len(states), n_actions, x.shape[1])
+        else:
+            raise ValueError("discrete actions: dynamics must be a callable model")
+        p = x.shape[1]
+        iu = np.triu_indices(p)
+
+        def quad_features(v: Any) -> Any:
+            outer = v[..., :, None] * v[..., None, :]
+            ones = th.ones((*v.shape[:-1], 1), dtype=th.float64)
+            return th.cat([outer[..., iu[0], iu[1]], v, ones], dim=-1)
+
+        # centred and scaled coordinates keep the least squares well conditioned
+        centre, spread = x.mean(axis=0), np.sqrt(var)
+        zx = th.tensor((x - centre) / spread, dtype=th.float64)
+        znext = th.tensor((nxt - centre) / spread, dtype=th.float64)
+        phi, phi_next = quad_features(zx), quad_features(znext)
+        ridge = 1e-6 * th.eye(phi.shape[1], dtype=th.float64)
+        fit_v = th.linalg.solve(phi.T @ phi + ridge, phi.T)  # V's weights from its targets
+        xs, mu = th.tensor(x, dtype=th.float64), th.tensor(target, dtype=th.float64)
+        acts = th.tensor(actions)
+        gamma = self.gamma
+
+        def loss(psi: Any) -> Any:
+            diff = xs - mu
+            reward = -th.einsum("ni,ij,nj->n", diff, psi, diff)
+            w = th.zeros(phi.shape[1], dtype=th.float64)
+            for _ in range(self.n_value_iterations):
+                q = reward[:, None] + gamma * phi_next @ w
+                w = fit_v @ th.logsumexp(q, dim=1)
+            q = reward[:, None] + gamma * phi_next @ w
+            logp = q - th.logsumexp(q, dim=1, keepdim=True)
+            return -logp[th.arange(len(acts)), acts].mean()
+
+        return self._optimise(loss, x, var)

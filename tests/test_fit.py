@@ -94,8 +94,12 @@ def test_estimators_and_kwargs_are_routed(demos):
         fit_task(demos, segmentation=tsc, window=3)
     with pytest.raises(TypeError, match="segmentation must be a TransitionStateClustering"):
         fit_task(demos, segmentation="tsc")
-    with pytest.raises(TypeError, match=r"reward must be a RewardLearner, .* got str"):
-        fit_task(demos, reward="quadratic")
+    with pytest.raises(TypeError, match=r"reward must be a RewardLearner, .* got int"):
+        fit_task(demos, reward=3)
+    with pytest.raises(ValueError, match=r"reward must be one of \['maxent', 'quadratic'\]"):
+        fit_task(demos, reward="quadraticc")
+    by_name = fit_task(demos, reward="quadratic", metric="euclidean", random_state=0)
+    assert by_name.metadata["reward"]["class"] == "QuadraticRewardLearner"
 
 
 def test_accepts_npz_paths_and_imitation_trajectories(demos, tmp_path):

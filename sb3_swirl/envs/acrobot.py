@@ -221,6 +221,11 @@ class NoisyAcrobotEnv(AcrobotEnv):
             min(max(w2, -mv2), mv2),
         )
 
+    def noise_free_step(self, observation: Sequence[float], action: int) -> np.ndarray:
+        """The observation one step after ``observation`` under ``action``, without noise
+        (the known model of ``fit_task(demos, reward="maxent", dynamics=...)``)."""
+        return np.array(self.simulate(observation, int(action)), dtype=np.float32)
+
     def energy(self, state: Sequence[float] | None = None) -> float:
         """Total mechanical energy (kinetic + potential, zero at the pivot height) [J].
 

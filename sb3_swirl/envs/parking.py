@@ -244,6 +244,24 @@ class ParallelParkingEnv(gym.Env):
                 theta = (theta + math.pi) % _TWO_PI - math.pi
         return (x, y, theta, units)
 
+    def noise_free_step(self, observation: np.ndarray, action: int) -> np.ndarray:
+        """The observation one step after ``observation`` under ``action``, without noise.
+
+        The known model that model-based reward learning can take instead of an estimated one
+        (``fit_task(demos, reward="maxent", dynamics=env.unwrapped.noise_free_step)``).
+
+        Raises
+        ------
+        ValueError
+            With ``partial_observation``: the hidden velocity makes the step unknowable.
+        """
+        if self.partial_observation:
+            raise ValueError("noise_free_step needs the velocity, which partial_observation hides")
+        x, y, theta, v = (float(o) for o in observation)
+        state = self.simulate((x, y, theta, round(v / self.speed_unit)), int(action))
+        x, y, theta, units = state
+        return np.array((x, y, theta, units * self.speed_unit), dtype=np.float32)
+
     def collides(self, state: State, margin: float = 0.0) -> bool:
         """Whether the car at ``state`` overlaps an obstacle or crosses the curb.
 
