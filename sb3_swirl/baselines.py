@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from sb3_swirl.demos import Demonstration
@@ -25,10 +26,12 @@ class BCPolicy:
 
     Parameters
     ----------
-    classifier : {"mlp", "svm"}, default "mlp"
+    classifier : {"mlp", "svm", "linear_svm"}, default "mlp"
         A multi-layer perceptron (:class:`sklearn.neural_network.MLPClassifier`, ReLU units,
-        Adam) or a support vector machine with an RBF kernel (:class:`sklearn.svm.SVC`, the
-        paper's SVM baseline).
+        Adam), a support vector machine with an RBF kernel (:class:`sklearn.svm.SVC`, the
+        paper's acrobot baseline) or a linear one as the paper's parking baseline (Appendix
+        A.2: hinge loss, L2 regularisation ``alpha = 5e-3``; :class:`sklearn.linear_model.
+        SGDClassifier`).
     hidden_layer_sizes : tuple of int, default (64, 64)
         The perceptron's hidden layers.
     max_iter : int, default 2000
@@ -51,13 +54,14 @@ class BCPolicy:
         max_iter: int = 2000,
         random_state: int | None = None,
     ) -> None:
-        self.classifier = check_option("classifier", classifier, ("mlp", "svm"))
+        self.classifier = check_option("classifier", classifier, ("mlp", "svm", "linear_svm"))
         self.hidden_layer_sizes = hidden_layer_sizes
         self.max_iter = max_iter
         self.random_state = random_state
 
     def fit(self, observations: np.ndarray, actions: np.ndarray) -> BCPolicy:
         """Fit on observations (n, d) and their discrete actions (n,); returns ``self``."""
+        from sklearn.linear_model import SGDClassifier
         from sklearn.neural_network import MLPClassifier
         from sklearn.pipeline import make_pipeline
         from sklearn.preprocessing import StandardScaler
@@ -72,6 +76,10 @@ class BCPolicy:
             )
         if self.classifier == "svm":
             classifier = SVC(kernel="rbf", random_state=self.random_state)
+        elif self.classifier == "linear_svm":
+            classifier = SGDClassifier(
+                loss="hinge", penalty="l2", alpha=5e-3, random_state=self.random_state
+            )
         else:
             classifier = MLPClassifier(
                 self.hidden_layer_sizes, max_iter=self.max_iter, random_state=self.random_state
@@ -104,3 +112,285 @@ def lifted_demos(
         observations.append(lifter.lift(states, index))
         actions.append(demo.actions)
     return np.concatenate(observations), np.concatenate(actions)
+
+
+# ---------------------------------------------------------------------- one interface
+#: The comparison methods of :func:`run_method` (paper §8.2; GAIL as a modern reference).
+METHODS: dict[str, str] = {
+    "swirl": "SwirlDQN on the SWIRL task (model-free local rewards)",
+    "swirl_maxent": "SwirlDQN on a SWIRL task with MaxEnt-IRL rewards, estimated dynamics",
+    "swirl_maxent_model": "the same with the env's known model (noise_free_step)",
+    "dqn": "pure exploration: DQN on the true reward",
+    "dqn_rbf": "DQN with the paper's RBF Q-function (RBFFeaturesExtractor)",
+    "bc_linear_svm": "pure demonstration: linear SVM (hinge loss, L2 alpha 5e-3)",
+    "bc_rbf_svm": "pure demonstration: RBF-kernel SVM",
+    "bc_mlp": "pure demonstration: a (64, 64) perceptron (scikit-learn)",
+    "bc_imitation": "pure demonstration: imitation's bc.BC (neural, optional extra)",
+    "qinit": "warm start: SwirlDQN's BC start on the true reward, no segments (§8.2.3)",
+    "global_irl": "one MaxEnt-IRL reward for the whole task, then DQN (§8.2.4)",
+    "global_irl_model": "the same with the env's known model",
+    "gail": "GAIL (imitation, PPO generator; optional extra)",
+}
+
+
+def _needs_actions(method: str, demos: Sequence[Demonstration]) -> None:
+    for i, demo in enumerate(demos):
+        if demo.actions is None:
+            raise ValueError(
+                f"demo {i} has no actions: method {method!r} learns from demonstrated actions "
+                "(label state-only demos with sb3_swirl.InverseDynamics first)"
+            )
+
+
+def evaluate_true_success(policy: Any, env: Any, n_episodes: int, seed: int) -> tuple[float, float]:
+    """Greedy episodes of ``policy`` (anything with SB3's ``predict``) in ``env``, the first
+    reset with ``seed``: the success rate (``info["is_success"]`` at the end) and the mean true
+    return (``info["task_reward"]`` under a SWIRL wrapper, else the reward)."""
+    successes, returns = [], []
+    obs, _ = env.reset(seed=seed)
+    for episode in range(n_episodes):
+        if episode:
+            obs, _ = env.reset()
+        total, done, info = 0.0, False, {}
+        while not done:
+            action, _ = policy.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, info = env.step(int(action))
+            total += float(info.get("task_reward", reward))
+            done = terminated or truncated
+        successes.append(bool(info.get("is_success", False)))
+        returns.append(total)
+    return float(np.mean(successes)), float(np.mean(returns))
+
+
+def _global_task(demos: Sequence[Demonstration], task: TaskModel, learner: Any) -> TaskModel:
+    """A one-segment task: the last region of ``task`` (the goal) and one reward learned by
+    ``learner`` on the whole demonstrations (no segments)."""
+    from swirl_wrappers import QuadraticReward
+
+    goal = task.regions[-1]
+    p = goal.mean.size
+    stub = TaskModel(
+        [goal],
+        [QuadraticReward(goal.mean, np.eye(p))],
+        dims=task.dims,
+        features=task.features,
+        angles=task.angles,
+    )
+    rewards = learner.fit(demos, stub).rewards_
+    return TaskModel(
+        [goal],
+        rewards,
+        dims=task.dims,
+        features=task.features,
+        angles=task.angles,
+        metadata={"fitted_by": "sb3_swirl.baselines (global IRL)"},
+    )
+
+
+def run_method(
+    method: str,
+    preset: Any,
+    demos: Sequence[Demonstration],
+    *,
+    seed: int,
+    total_timesteps: int,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Fit ``method`` on ``demos``, train it for ``total_timesteps`` env steps (RL methods) and
+    evaluate its true success, in the result format of
+    :func:`sb3_swirl.experiments.train_and_evaluate` (``curve`` of evaluations with
+    ``timesteps``, ``episodes``, ``success_rate``, ``task_return``; ``final_success``,
+    ``best_success``, ``rollouts_to_target``, ``wall_time_s``), so one table and one plot hold
+    every method. Behavioural cloning uses no env steps: its curve is one point at 0.
+
+    Parameters
+    ----------
+    method : str
+        A key of :data:`METHODS`.
+    preset : sb3_swirl.experiments.Preset
+        The task, its fit settings, evaluation schedule and success target.
+    demos : sequence of Demonstration
+        With actions (every method but ``swirl`` clones or imitates them).
+    seed : int
+    total_timesteps : int
+    """
+    import time
+
+    from sb3_swirl.experiments import (
+        _swirl_spec,
+        load_hyperparams,
+        rollouts_to_success,
+        train_and_evaluate,
+    )
+    from sb3_swirl.fitting import fit_task
+
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose from {sorted(METHODS)}")
+    if method != "swirl":
+        _needs_actions(method, demos)
+    budget = {"total_timesteps": total_timesteps, "seed": seed, "progress": progress}
+    fit = {"random_state": seed, **preset.fit_kwargs}
+
+    def known_model() -> Any:
+        env = gym.make(preset.env_id).unwrapped
+        if not hasattr(env, "noise_free_step"):
+            raise ValueError(f"method {method!r} needs a known model; {preset.env_id} has none")
+        return env.noise_free_step
+
+    if method in ("swirl", "swirl_maxent", "swirl_maxent_model"):
+        reward = {"swirl": {}, "swirl_maxent": {"reward": "maxent"}}.get(
+            method, {"reward": "maxent", "dynamics": known_model()}
+        )
+        task = fit_task(demos, **fit, **reward)
+        result = train_and_evaluate("swirl_dqn", preset, task=task, demos=demos, **budget)
+        return result | {"method": method, "n_segments": task.n_segments}
+    if method in ("dqn", "dqn_rbf"):
+        hyperparams = load_hyperparams("dqn", preset.env_id)
+        if method == "dqn_rbf":
+            from sb3_swirl.features import RBFFeaturesExtractor
+
+            hyperparams["policy_kwargs"] = {
+                "features_extractor_class": RBFFeaturesExtractor,
+                "net_arch": [],
+            }
+        result = train_and_evaluate("dqn", preset, hyperparams=hyperparams, **budget)
+        return result | {"method": method}
+    if method in ("qinit", "global_irl", "global_irl_model"):
+        from sb3_swirl.rewards import MaxEntIRLRewardLearner, QuadraticRewardLearner
+
+        task = fit_task(demos, **fit)
+        swirl = load_hyperparams("swirl_dqn", preset.env_id)
+        spec = _swirl_spec(swirl)
+        if method == "qinit":  # the true reward alone, BC start and SwirlDQN's settings
+            learner, hyperparams, clone = QuadraticRewardLearner(), swirl, demos
+            wrapper = {
+                "reward_config": {"mode": "potential", "scale": 0.0, "task_reward_weight": 1.0}
+            }
+        else:  # the IRL reward, then plain DQN's settings
+            dynamics = known_model() if method == "global_irl_model" else None
+            learner, clone = MaxEntIRLRewardLearner(dynamics=dynamics), None
+            hyperparams = load_hyperparams("dqn", preset.env_id)
+            wrapper = {"reward_config": spec.get("reward_config", {})}
+        hyperparams = {
+            **hyperparams,
+            "env_wrapper": [{"sb3_swirl.zoo.SwirlTaskWrapper": wrapper}],
+        }
+        global_task = _global_task(demos, task, learner)
+        result = train_and_evaluate(
+            "swirl_dqn", preset, task=global_task, demos=clone, hyperparams=hyperparams, **budget
+        )
+        return result | {"method": method}
+
+    start = time.perf_counter()
+    env = gym.make(preset.env_id)
+    if method.startswith("bc_"):
+        policy = _fit_bc(method, demos, env, seed)
+        steps = episodes = 0
+    else:
+        policy, steps, episodes = _train_gail(demos, preset.env_id, total_timesteps, seed)
+    eval_env = gym.make(preset.env_id)
+    success, task_return = evaluate_true_success(
+        policy, eval_env, preset.n_eval_episodes, seed + 10_000
+    )
+    curve = [
+        {
+            "timesteps": steps,
+            "episodes": episodes,
+            "success_rate": success,
+            "task_return": task_return,
+        }
+    ]
+    return {
+        "algo": method,
+        "method": method,
+        "hyperparams": {},
+        "curve": curve,
+        "final_success": success,
+        "best_success": success,
+        "best_success_episodes": episodes,
+        "rollouts_to_target": rollouts_to_success(curve, preset.target_success),
+        "wall_time_s": time.perf_counter() - start,
+    }
+
+
+def _fit_bc(method: str, demos: Sequence[Demonstration], env: Any, seed: int) -> Any:
+    """A behavioural clone of the demos on the raw observations."""
+    observations = np.concatenate([d.observations[:-1] for d in demos])
+    actions = np.concatenate([np.asarray(d.actions) for d in demos])
+    if method == "bc_imitation":
+        from imitation.algorithms import bc
+        from imitation.util import logger
+
+        from sb3_swirl.demos import to_imitation
+
+        trainer = bc.BC(
+            observation_space=env.observation_space,
+            action_space=env.action_space,
+            demonstrations=to_imitation(demos),
+            rng=np.random.default_rng(seed),
+            batch_size=64,
+            custom_logger=logger.configure(format_strs=[]),
+        )
+        trainer.train(n_epochs=300, progress_bar=False, log_interval=10**9)
+        return trainer.policy
+    classifier = {"bc_linear_svm": "linear_svm", "bc_rbf_svm": "svm", "bc_mlp": "mlp"}[method]
+    return BCPolicy(classifier, random_state=seed).fit(observations, actions)
+
+
+def _train_gail(
+    demos: Sequence[Demonstration], env_id: str, total_timesteps: int, seed: int
+) -> tuple[Any, int, int]:
+    """GAIL (imitation) with a PPO generator for ``total_timesteps`` env steps."""
+    from imitation.algorithms.adversarial.gail import GAIL
+    from imitation.data.wrappers import RolloutInfoWrapper
+    from imitation.rewards.reward_nets import BasicRewardNet
+    from imitation.util import logger
+    from imitation.util.networks import RunningNorm
+    from imitation.util.util import make_vec_env
+    from stable_baselines3 import PPO
+
+    from sb3_swirl.demos import to_imitation
+
+    n_envs, n_steps = 4, 256
+    if total_timesteps < n_envs * n_steps:
+        raise ValueError(
+            f"gail needs total_timesteps >= {n_envs * n_steps} (one round of its PPO generator: "
+            f"{n_steps} steps in each of {n_envs} envs), got {total_timesteps}"
+        )
+    venv = make_vec_env(
+        env_id,
+        rng=np.random.default_rng(seed),
+        n_envs=n_envs,
+        post_wrappers=[lambda env, _: _EpisodeCounter(RolloutInfoWrapper(env))],
+    )
+    learner = PPO("MlpPolicy", venv, batch_size=64, n_steps=n_steps, seed=seed, verbose=0)
+    reward_net = BasicRewardNet(
+        venv.observation_space, venv.action_space, normalize_input_layer=RunningNorm
+    )
+    trainer = GAIL(
+        demonstrations=to_imitation(demos),
+        demo_batch_size=256,
+        gen_replay_buffer_capacity=1024,
+        n_disc_updates_per_round=4,
+        venv=venv,
+        gen_algo=learner,
+        reward_net=reward_net,
+        allow_variable_horizon=True,
+        custom_logger=logger.configure(format_strs=[]),  # no tables on stdout
+    )
+    trainer.train(total_timesteps)
+    episodes = sum(int(e.get_wrapper_attr("episodes")) for e in venv.envs)
+    return learner, int(learner.num_timesteps), episodes
+
+
+class _EpisodeCounter(gym.Wrapper):
+    """Counts the episodes that end (the rollouts of an on-policy learner)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.episodes = 0
+
+    def step(self, action: Any) -> Any:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.episodes += bool(terminated or truncated)
+        return obs, reward, terminated, truncated, info

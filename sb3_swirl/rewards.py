@@ -287,6 +287,13 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         The known model (see above); ``None`` estimates a linear model per segment.
     max_iter : int, default 100
         L-BFGS iterations (strong Wolfe line search) on the likelihood.
+    value_function : {"quadratic", "tabular"}, default "quadratic"
+        Discrete actions: soft value iteration with a quadratic value function fitted on the
+        segment's states (any number of dims), or on a grid (``n_bins`` per task-space axis
+        over the segment's range, ``P(s' | s, a)`` counted from the demonstrated transitions or
+        from the known model; at most 50 000 cells).
+    n_bins : int, default 6
+        Bins per axis of ``value_function="tabular"``.
     n_value_iterations : int, default 60
         Soft Bellman iterations per likelihood evaluation (discrete actions; the Riccati
         recursion of the continuous case runs as many).
@@ -320,6 +327,8 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         "action_cost": [Interval(Real, 0, np.inf, closed="neither")],
         "dynamics": [callable, tuple, None],
         "max_iter": [Interval(Integral, 1, None, closed="left")],
+        "value_function": [StrOptions({"quadratic", "tabular"})],
+        "n_bins": [Interval(Integral, 2, None, closed="left")],
         "n_value_iterations": [Interval(Integral, 1, None, closed="left")],
         "regularization": [Interval(Real, 0, np.inf, closed="neither")],
         "weight_decay": [Interval(Real, 0, np.inf, closed="left")],
@@ -333,6 +342,8 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         action_cost: float = 1.0,
         dynamics: Callable[[np.ndarray, Any], np.ndarray] | tuple | None = None,
         max_iter: int = 100,
+        value_function: str = "quadratic",
+        n_bins: int = 6,
         n_value_iterations: int = 60,
         regularization: float = 1e-3,
         weight_decay: float = 1e-3,
@@ -343,6 +354,8 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         self.action_cost = action_cost
         self.dynamics = dynamics
         self.max_iter = max_iter
+        self.value_function = value_function
+        self.n_bins = n_bins
         self.n_value_iterations = n_value_iterations
         self.regularization = regularization
         self.weight_decay = weight_decay
@@ -519,17 +532,23 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         import torch as th
 
         x, actions = seg["x"], np.asarray(seg["actions"]).astype(int)
-        if self.dynamics is None:
-            onehot = np.eye(n_actions)[actions]
-            a, b, c = self._linear_model(x, onehot, seg["next_x"])
-            nxt = (x @ a.T + c)[:, None, :] + b.T[None, :, :]  # (n, actions, p)
-        elif callable(self.dynamics):
+        known = None  # the known model's next state under every action, (n, actions, p)
+        if callable(self.dynamics):
             states = seg["states"]
             raw = [[self.dynamics(s, a) for a in range(n_actions)] for s in states]
             flat = np.asarray(raw, dtype=float).reshape(len(states) * n_actions, -1)
-            nxt = featurize(flat).reshape(len(states), n_actions, x.shape[1])
-        else:
+            known = featurize(flat).reshape(len(states), n_actions, x.shape[1])
+        elif self.dynamics is not None:
             raise ValueError("discrete actions: dynamics must be a callable model")
+        if self.value_function == "tabular":
+            loss = self._tabular_loss(x, actions, seg["next_x"], known, target, n_actions)
+            return self._optimise(loss, x, var)
+        if known is not None:
+            nxt = known
+        else:
+            onehot = np.eye(n_actions)[actions]
+            a, b, c = self._linear_model(x, onehot, seg["next_x"])
+            nxt = (x @ a.T + c)[:, None, :] + b.T[None, :, :]  # (n, actions, p)
         p = x.shape[1]
         iu = np.triu_indices(p)
 
@@ -561,3 +580,71 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
             return -logp[th.arange(len(acts)), acts].mean()
 
         return self._optimise(loss, x, var)
+
+    def _tabular_loss(
+        self,
+        x: np.ndarray,
+        actions: np.ndarray,
+        next_x: np.ndarray,
+        known: np.ndarray | None,
+        target: np.ndarray,
+        n_actions: int,
+    ) -> Callable[[Any], Any]:
+        """The negative log-likelihood of the demonstrated actions under tabular soft value
+        iteration: the segment's task space cut into ``n_bins`` equal bins per axis over the
+        range of its states, ``P(s' | s, a)`` counted from the demonstrated transitions (or
+        from the known model's next states under every action), an unseen ``(s, a)`` staying
+        in ``s``; the reward of a bin is ``R_i`` at its centre."""
+        import torch as th
+
+        p, n = x.shape[1], self.n_bins
+        n_states = n**p
+        if n_states > 50_000:
+            raise ValueError(
+                f"value_function='tabular' with {p} task-space dims and n_bins={n} makes "
+                f"{n_states} states (at most 50000): use fewer bins or dims, or "
+                "value_function='quadratic'"
+            )
+        low, high = x.min(axis=0), x.max(axis=0)
+        width = np.where(high > low, (high - low) / n, 1.0)
+
+        def cell(v: np.ndarray) -> np.ndarray:
+            index = np.clip(np.floor((v - low) / width), 0, n - 1).astype(int)
+            return np.ravel_multi_index(tuple(np.moveaxis(index, -1, 0)), (n,) * p)
+
+        here = cell(x)
+        if known is None:
+            rows, there = here * n_actions + actions, cell(next_x)
+        else:
+            rows = (here[:, None] * n_actions + np.arange(n_actions)).ravel()
+            there = cell(known.reshape(-1, p))
+        counts: dict[tuple[int, int], float] = {}
+        for r, t in zip(rows.tolist(), there.tolist(), strict=True):
+            counts[r, t] = counts.get((r, t), 0.0) + 1.0
+        seen = np.zeros(n_states * n_actions, dtype=bool)
+        seen[rows] = True
+        unseen = np.flatnonzero(~seen)
+        src = np.concatenate([np.array([k[0] for k in counts], dtype=int), unseen])
+        dst = np.concatenate([np.array([k[1] for k in counts], dtype=int), unseen // n_actions])
+        mass = np.concatenate([np.array(list(counts.values())), np.ones(len(unseen))])
+        total = np.bincount(src, weights=mass, minlength=n_states * n_actions)
+        src_t, dst_t = th.tensor(src), th.tensor(dst)
+        prob = th.tensor(mass / total[src])
+        axes = [low[j] + width[j] * (np.arange(n) + 0.5) for j in range(p)]
+        grids = np.meshgrid(*axes, indexing="ij")
+        centres = th.tensor(np.stack([g.ravel() for g in grids], axis=1) - target)
+        cells, acts = th.tensor(here), th.tensor(actions)
+        gamma = self.gamma
+
+        def loss(psi: Any) -> Any:
+            reward = -th.einsum("ni,ij,nj->n", centres, psi, centres)
+            value = th.zeros(n_states, dtype=th.float64)
+            for _ in range(self.n_value_iterations + 1):
+                expected = th.zeros(n_states * n_actions, dtype=th.float64)
+                expected = expected.index_add(0, src_t, prob * value[dst_t])
+                q = reward[:, None] + gamma * expected.view(n_states, n_actions)
+                value = th.logsumexp(q, dim=1)
+            logp = q[cells] - value[cells, None]
+            return -logp[th.arange(len(acts)), acts].mean()
+
+        return loss

@@ -1,0 +1,61 @@
+"""The comparison methods (sb3_swirl.baselines): one interface, one result format."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from sb3_swirl.baselines import METHODS, BCPolicy, run_method
+from sb3_swirl.demos import Demonstration
+from sb3_swirl.experiments import PRESETS
+from sb3_swirl.supervisors import collect_demos
+
+PRESET = dataclasses.replace(PRESETS["parking"], eval_freq=250, n_eval_episodes=2)
+FIELDS = {
+    "algo",
+    "method",
+    "curve",
+    "final_success",
+    "best_success",
+    "rollouts_to_target",
+    "wall_time_s",
+}
+
+
+@pytest.fixture(scope="module")
+def demos():
+    return collect_demos(PRESET.env_id, 5, seed=0)
+
+
+@pytest.mark.parametrize("method", sorted(METHODS))
+def test_every_method_runs_on_a_tiny_budget_with_the_shared_fields(method, demos):
+    steps = 1024 if method == "gail" else 500
+    result = run_method(method, PRESET, demos, seed=0, total_timesteps=steps)
+    assert FIELDS <= set(result) and result["method"] == method
+    point = result["curve"][-1]
+    assert set(point) == {"timesteps", "episodes", "success_rate", "task_return"}
+    assert 0.0 <= result["final_success"] <= result["best_success"] <= 1.0
+    if method.startswith("bc_"):
+        assert point["timesteps"] == 0  # cloning uses no env steps
+    else:
+        assert point["timesteps"] >= 500
+
+
+def test_linear_svm_clones_the_parking_supervisor(demos):
+    """The paper's parking BC baseline (hinge loss, L2 alpha 5e-3) fits the demos well."""
+    x = np.concatenate([d.observations[:-1] for d in demos])
+    y = np.concatenate([d.actions for d in demos])
+    policy = BCPolicy("linear_svm", random_state=0).fit(x, y)
+    assert np.mean(policy.predict(x)[0] == y) >= 0.9
+
+
+def test_methods_that_need_actions_say_so(demos):
+    state_only = [Demonstration(d.observations) for d in demos]
+    with pytest.raises(ValueError, match=r"demo 0 has no actions: method 'bc_linear_svm'"):
+        run_method("bc_linear_svm", PRESET, state_only, seed=0, total_timesteps=100)
+    with pytest.raises(ValueError, match="unknown method 'svm'"):
+        run_method("svm", PRESET, demos, seed=0, total_timesteps=100)
+    with pytest.raises(ValueError, match="gail needs total_timesteps >= 1024"):
+        run_method("gail", PRESET, demos, seed=0, total_timesteps=100)
