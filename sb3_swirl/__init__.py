@@ -8,7 +8,7 @@ Importing the package registers the ``sb3_swirl/`` gymnasium environments.
 """
 
 from sb3_swirl import envs  # noqa: F401  (registers the sb3_swirl/ gymnasium envs)
-from sb3_swirl.baselines import BCPolicy
+from sb3_swirl.baselines import BCPolicy, run_method
 from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
 from sb3_swirl.datasets import make_switching_demos
 from sb3_swirl.demos import (
@@ -87,6 +87,7 @@ __all__ = [
     "plot_segments",
     "plot_sheet",
     "plot_transitions",
+    "run_method",
     "ruptures_indicator",
     "save_demos",
     "switch_scores",

@@ -1,5 +1,10 @@
-"""Comparison methods of the paper: pure demonstration (behavioural cloning), with or without
-SWIRL's segments.
+"""The paper's comparison methods (§8.2), with one interface and one result format.
+
+:func:`run_method` fits a method on demos, trains it for a budget of env steps and evaluates
+its true success, returning the record of :func:`sb3_swirl.experiments.train_and_evaluate`,
+so SwirlDQN and every baseline share one table and one plot (:data:`METHODS` lists them:
+SWIRL with model-free or MaxEnt rewards, DQN, RBF DQN, behavioural cloning with SVMs, a
+perceptron or imitation's ``bc.BC``, Q-init, global IRL and GAIL).
 
 A :class:`BCPolicy` predicts like a Stable-Baselines3 model (``predict(obs, deterministic)``),
 so one evaluation loop scores it beside SwirlDQN and DQN. Fit it on the raw observations for
