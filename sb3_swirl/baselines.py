@@ -318,11 +318,22 @@ def run_method(
     }
 
 
+def _require_imitation(method: str) -> None:
+    try:
+        import imitation  # noqa: F401
+    except ImportError:
+        raise ImportError(
+            f"method {method!r} needs the imitation library, installed without its old pins: "
+            "pip install --no-deps imitation==1.0.1 seals==0.2.1 (make install does it)"
+        ) from None
+
+
 def _fit_bc(method: str, demos: Sequence[Demonstration], env: Any, seed: int) -> Any:
     """A behavioural clone of the demos on the raw observations."""
     observations = np.concatenate([d.observations[:-1] for d in demos])
     actions = np.concatenate([np.asarray(d.actions) for d in demos])
     if method == "bc_imitation":
+        _require_imitation(method)
         from imitation.algorithms import bc
         from imitation.util import logger
 
@@ -346,6 +357,7 @@ def _train_gail(
     demos: Sequence[Demonstration], env_id: str, total_timesteps: int, seed: int
 ) -> tuple[Any, int, int]:
     """GAIL (imitation) with a PPO generator for ``total_timesteps`` env steps."""
+    _require_imitation("gail")
     from imitation.algorithms.adversarial.gail import GAIL
     from imitation.data.wrappers import RolloutInfoWrapper
     from imitation.rewards.reward_nets import BasicRewardNet

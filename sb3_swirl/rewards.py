@@ -94,6 +94,20 @@ def segment_states(
     return segments, regions
 
 
+def _mean_cost(x: np.ndarray, target: np.ndarray, weight: np.ndarray) -> float:
+    """Mean of ``(x - target)^T weight (x - target)`` over the rows of ``x``."""
+    diff = x - target
+    return float(np.mean(np.einsum("ij,jk,ik->i", diff, weight, diff)))
+
+
+def _inverse_covariance(x: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """The symmetric inverse of the covariance of the rows of ``x`` plus ``floor``."""
+    p = x.shape[1]
+    cov = np.cov(x, rowvar=False).reshape(p, p) if len(x) > 1 else np.zeros((p, p))
+    weight = np.linalg.inv(cov + floor)
+    return (weight + weight.T) / 2
+
+
 class RewardLearner(BaseEstimator, ABC):
     """Protocol of the reward learners: ``fit(demos, segmentation)`` sets ``rewards_``.
 
@@ -195,15 +209,9 @@ class QuadraticRewardLearner(StrictParamsMixin, RewardLearner):
             # A segment no demonstration entered falls back on the statistics of all states.
             x = np.concatenate(seg) if seg else pooled
             sizes.append(sum(len(s) for s in seg))
-            if self.metric == "euclidean":
-                weight = np.eye(p)
-            else:
-                cov = np.cov(x, rowvar=False).reshape(p, p) if len(x) > 1 else np.zeros((p, p))
-                weight = np.linalg.inv(cov + floor)
-                weight = (weight + weight.T) / 2
+            weight = np.eye(p) if self.metric == "euclidean" else _inverse_covariance(x, floor)
             if self.normalize:
-                diff = x - region.mean
-                mean_cost = float(np.mean(np.einsum("ij,jk,ik->i", diff, weight, diff)))
+                mean_cost = _mean_cost(x, region.mean, weight)
                 if mean_cost > 1e-12:
                     weight = weight / mean_cost
             rewards.append(QuadraticReward(target=region.mean, weight=weight))
@@ -308,8 +316,6 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         Scale each ``Psi_i`` so the mean reward over the segment's demonstration states is
         ``-1``, the scale of :class:`QuadraticRewardLearner` (the shape of ``Psi_i`` is the
         MaxEnt estimate; ``raw_scales_`` keeps the factor).
-    random_state : int, optional
-        Not used: the fit is deterministic (the parameter keeps ``fit_task``'s interface).
 
     Attributes
     ----------
@@ -333,7 +339,6 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         "regularization": [Interval(Real, 0, np.inf, closed="neither")],
         "weight_decay": [Interval(Real, 0, np.inf, closed="left")],
         "normalize": ["boolean"],
-        "random_state": ["random_state"],
     }
 
     def __init__(
@@ -348,7 +353,6 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         regularization: float = 1e-3,
         weight_decay: float = 1e-3,
         normalize: bool = True,
-        random_state: int | None = None,
     ) -> None:
         self.gamma = gamma
         self.action_cost = action_cost
@@ -360,7 +364,6 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         self.regularization = regularization
         self.weight_decay = weight_decay
         self.normalize = normalize
-        self.random_state = random_state
 
     def fit(
         self, demos: Any, segmentation: Any, features: RBFFeatures | None = None
@@ -407,11 +410,8 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
                 weight, ll = self._fit_discrete(seg, region.mean, n_actions, featurize, var)
             else:
                 weight, ll = self._fit_continuous(seg, region.mean, var)
-            scale = 1.0
-            if self.normalize:
-                diff = x - region.mean
-                scale = float(np.mean(np.einsum("ij,jk,ik->i", diff, weight, diff)))
-                scale = scale if scale > 1e-12 else 1.0
+            scale = _mean_cost(x, region.mean, weight) if self.normalize else 1.0
+            scale = scale if scale > 1e-12 else 1.0
             rewards.append(QuadraticReward(target=region.mean, weight=weight / scale))
             loglik.append(ll)
             scales.append(scale)
@@ -447,12 +447,9 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         and ``-loss``."""
         import torch as th
 
-        p = x.shape[1]
-        cov = np.cov(x, rowvar=False).reshape(p, p) if len(x) > 1 else np.zeros((p, p))
-        start = np.linalg.inv(cov + self.regularization * np.diag(var))
-        diff = x - x.mean(axis=0)
-        start /= max(float(np.mean(np.einsum("ij,jk,ik->i", diff, start, diff))), 1e-12)
-        chol = th.tensor(np.linalg.cholesky((start + start.T) / 2), requires_grad=True)
+        start = _inverse_covariance(x, self.regularization * np.diag(var))
+        start /= max(_mean_cost(x, x.mean(axis=0), start), 1e-12)
+        chol = th.tensor(np.linalg.cholesky(start), requires_grad=True)
         floor = th.tensor(self.regularization * np.diag(1.0 / var))
         std = th.tensor(np.sqrt(var))
         optimiser = th.optim.LBFGS(
