@@ -234,3 +234,41 @@ def test_bad_action_and_state():
         env.step(4)
     with pytest.raises(ValueError, match="finite"):
         env.set_state(0.0, float("inf"))
+
+
+UNDER = "sb3_swirl/UnderactuatedAcrobot-v0"
+
+
+def test_underactuated_variant_is_gymnasiums_acrobot_with_noise():
+    """Torque on joint 2 only, three actions (-, 0, +) as in Acrobot-v1, gymnasium's torque."""
+    env = gym.make(UNDER).unwrapped
+    assert env.action_space.n == 3 and env.actuation == "second" and env.torque == 1.0
+    theirs = AcrobotEnv()
+    quiet = NoisyAcrobotEnv(actuation="second", torque=1.0, torque_noise_std=0.0)
+    rng = np.random.default_rng(1)
+    for action in range(3):
+        state = rng.uniform(-2.0, 2.0, size=4)
+        expected = rk4(theirs._dsdt, np.append(state, action - 1.0), [0, theirs.dt])
+        np.testing.assert_allclose(
+            quiet._integrate(*state, 0.0, action - 1.0), expected, atol=1e-12
+        )
+        assert quiet.noise_free_step(state, action).shape == (4,)
+    check_env(gym.make(UNDER, render_mode="rgb_array").unwrapped, skip_render_check=False)
+    sb3_check_env(gym.make(UNDER).unwrapped, warn=True)
+    with pytest.raises(ValueError, match=r"action must be an integer in \[0, 3\)"):
+        env.reset(seed=0)
+        env.step(3)
+    with pytest.raises(ValueError, match="actuation"):
+        NoisyAcrobotEnv(actuation="first")
+
+
+def test_underactuated_variant_is_seeded_and_its_supervisor_swings_up():
+    from sb3_swirl.supervisors import collect_demos
+
+    first = rollout(gym.make(UNDER), [0, 2, 1] * 10, seed=4)
+    again = rollout(gym.make(UNDER), [0, 2, 1] * 10, seed=4)
+    other = rollout(gym.make(UNDER), [0, 2, 1] * 10, seed=5)
+    np.testing.assert_array_equal(first, again)
+    assert not np.array_equal(first, other)
+    demos = collect_demos(UNDER, 5, seed=0)  # every episode must succeed, or this raises
+    assert all(len(d) < 1000 for d in demos)

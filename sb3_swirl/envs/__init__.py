@@ -32,6 +32,14 @@ register(
     entry_point="sb3_swirl.envs.acrobot:NoisyAcrobotEnv",
     max_episode_steps=1000,
 )
+# gymnasium's Acrobot-v1 actuation (joint 2 only) and torque, with the paper's Gaussian noise
+# (20% of the torque, as NoisyAcrobot) and 1000-step horizon
+register(
+    id="sb3_swirl/UnderactuatedAcrobot-v0",
+    entry_point="sb3_swirl.envs.acrobot:NoisyAcrobotEnv",
+    max_episode_steps=1000,
+    kwargs={"actuation": "second", "torque": 1.0, "torque_noise_std": 0.2},
+)
 
 register(
     id="sb3_swirl/DVRKLineCutting-v0",

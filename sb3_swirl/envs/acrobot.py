@@ -12,7 +12,7 @@ from gymnasium import spaces
 from gymnasium.envs.classic_control import utils
 from gymnasium.envs.classic_control.acrobot import AcrobotEnv
 
-from swirl_wrappers._validation import check_real
+from swirl_wrappers._validation import check_option, check_real
 
 #: gravitational acceleration [m/s^2], the value gymnasium's ``AcrobotEnv._dsdt`` uses
 GRAVITY = 9.8
@@ -80,6 +80,12 @@ class NoisyAcrobotEnv(AcrobotEnv):
     torque_noise_std : float, default :attr:`TORQUE_NOISE_STD`
         Standard deviation of the Gaussian noise added to the applied torque [N·m]; 0 makes
         the dynamics deterministic.
+    actuation : {"both", "second"}, default "both"
+        ``"second"``: the under-actuated acrobot of gymnasium's ``Acrobot-v1``, a torque on
+        joint 2 only, ``Discrete(3)``: 0 = clockwise (−), 1 = none, 2 = counter-clockwise (+);
+        the noise is added to joint 2's torque on every step. Registered as
+        ``sb3_swirl/UnderactuatedAcrobot-v0`` with gymnasium's torque (1 N·m) and noise of 20%
+        of it, the ratio of this env's defaults; not tuned to any method.
 
     Examples
     --------
@@ -111,10 +117,12 @@ class NoisyAcrobotEnv(AcrobotEnv):
         link_length_2: float = 1.0,
         torque: float = TORQUE,
         torque_noise_std: float = TORQUE_NOISE_STD,
+        actuation: str = "both",
     ) -> None:
         link_length_2 = check_real("link_length_2", link_length_2, low=0.0, low_open=True)
         torque = check_real("torque", torque, low=0.0)
         torque_noise_std = check_real("torque_noise_std", torque_noise_std, low=0.0)
+        self.actuation = check_option("actuation", actuation, ("both", "second"))
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
@@ -148,7 +156,7 @@ class NoisyAcrobotEnv(AcrobotEnv):
             dtype=np.float32,
         )
         self.observation_space = spaces.Box(low=-high, high=high, dtype=np.float32)
-        self.action_space = spaces.Discrete(4)
+        self.action_space = spaces.Discrete(4 if self.actuation == "both" else 3)
         self.state: np.ndarray | None = None
         self._noise = np.empty(0)
         self._noise_pos = 0
@@ -206,12 +214,15 @@ class NoisyAcrobotEnv(AcrobotEnv):
         state : sequence of 4 floats
             ``(theta1, theta2, omega1, omega2)``.
         action : int
-            In ``[0, 4)``; see the class docstring.
+            In ``[0, action_space.n)``; see the class docstring.
         torque_noise : float, default 0.0
             Added to the applied torque [N·m].
         """
-        tau = (self.torque if action % 2 == 0 else -self.torque) + torque_noise
-        tau1, tau2 = (tau, 0.0) if action < 2 else (0.0, tau)
+        if self.actuation == "second":
+            tau1, tau2 = 0.0, (action - 1) * self.torque + torque_noise
+        else:
+            tau = (self.torque if action % 2 == 0 else -self.torque) + torque_noise
+            tau1, tau2 = (tau, 0.0) if action < 2 else (0.0, tau)
         t1, t2, w1, w2 = self._integrate(*state, tau1, tau2)
         mv1, mv2 = self.MAX_VEL_1, self.MAX_VEL_2
         return (
@@ -296,7 +307,9 @@ class NoisyAcrobotEnv(AcrobotEnv):
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         state = self._current()
         if not self.action_space.contains(action):
-            raise ValueError(f"action must be an integer in [0, 4), got {action!r}")
+            raise ValueError(
+                f"action must be an integer in [0, {self.action_space.n}), got {action!r}"
+            )
         noise = self.torque_noise_std * self._next_noise() if self.torque_noise_std > 0 else 0.0
         self.state = np.array(self.simulate(state.tolist(), int(action), noise))
         success = self._terminal()

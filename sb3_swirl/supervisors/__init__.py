@@ -34,6 +34,7 @@ SUPERVISORS: dict[str, str] = {
     "sb3_swirl/ParallelParkingPartial-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
     "sb3_swirl/ParallelParkingPerturbed-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
     "sb3_swirl/NoisyAcrobot-v0": "sb3_swirl.supervisors.acrobot:AcrobotSupervisor",
+    "sb3_swirl/UnderactuatedAcrobot-v0": "sb3_swirl.supervisors.acrobot:AcrobotSupervisor",
     "sb3_swirl/DVRKLineCutting-v0": "sb3_swirl.supervisors.line_cutting:LineCuttingSupervisor",
     "sb3_swirl/DVRKTensioning-v0": "sb3_swirl.supervisors.tensioning:TensioningSupervisor",
 }

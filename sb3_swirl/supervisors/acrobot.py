@@ -10,8 +10,10 @@ from sb3_swirl.supervisors._shared import controlled_env
 from swirl_wrappers._validation import check_int
 
 
-def _max_power_action(w1: float, w2: float) -> int:
+def _max_power_action(env: NoisyAcrobotEnv, w1: float, w2: float) -> int:
     """The action whose torque puts the most power ``tau . omega`` into the arm."""
+    if env.actuation == "second":
+        return 2 if w2 >= 0.0 else 0
     if abs(w1) >= abs(w2):
         return 0 if w1 >= 0.0 else 1
     return 2 if w2 >= 0.0 else 3
@@ -21,7 +23,7 @@ class AcrobotSupervisor:
     """Energy-pumping swing-up controller with a short look-ahead on the noise-free model.
 
     The paper's supervisor was model-predictive control with re-planning (Appendix B). This
-    one re-plans every step: for each of the four actions it simulates the env's own
+    one re-plans every step: for each action it simulates the env's own
     dynamics without noise for ``horizon`` steps, the first step with that action and the
     rest with the action that puts the most power into the arm (``argmax tau . omega``,
     energy pumping à la Spong with discrete torques). It takes the action whose rollout
@@ -66,7 +68,8 @@ class AcrobotSupervisor:
     def act(self, obs: np.ndarray) -> int:
         """The action to take in ``obs = (theta1, theta2, omega1, omega2)``."""
         state = self._check_obs(obs)
-        scores = [self._rollout_score(state, action) for action in range(4)]
+        actions = range(self.env.action_space.n)
+        scores = [self._rollout_score(state, action) for action in actions]
         return int(np.argmax(scores))
 
     def _check_obs(self, obs: np.ndarray) -> tuple[float, float, float, float]:
@@ -85,5 +88,5 @@ class AcrobotSupervisor:
             if env.tip_height(state) > env.SUCCESS_HEIGHT:
                 # Any success outranks any energy; sooner is better.
                 return 1e6 - k
-            action = _max_power_action(state[2], state[3])
+            action = _max_power_action(env, state[2], state[3])
         return env.energy(state)
