@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml wrappers/pyproject.toml Makefile
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# torch first, pinned: an unpinned torch pulls a multi-GB CUDA build
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e ./wrappers -e ".[zoo,render,robosuite,dev]"
+	$(BIN)/python -m pip install --quiet -e ./wrappers -e ".[zoo,render,robosuite,ray,dev]"
 	# imitation pins old SB3/gymnasium; its data types work with ours (see NOTES-stack.md)
 	$(BIN)/python -m pip install --quiet --no-deps imitation==1.0.1 seals==0.2.1
 	touch $(STAMP)

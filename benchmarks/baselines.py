@@ -14,8 +14,13 @@ Prints, per task, each method's rollouts to 95 % true success (median over seeds
 many seeds reached it), final and best success, and wall time; writes
 ``results/baselines/results.json`` with every seed's curve.
 
+Runs go through :func:`sb3_swirl.runner.run_sweep`: each run's record lands in
+``OUT/runs.jsonl`` as it finishes (``--resume`` continues an interrupted sweep), on local
+processes or a Ray cluster (``--backend ray [--address ...]``).
+
 Run: ``.venv/bin/python benchmarks/baselines.py [--tasks parking partial] [--seeds 10 11 12]
-[--methods swirl dqn ...] [--total-timesteps 30000] [--jobs 2] [--quick]``.
+[--methods swirl dqn ...] [--total-timesteps 30000] [--jobs 2] [--backend joblib|ray]
+[--resume] [--quick] [--out results/baselines]``.
 """
 
 from __future__ import annotations
@@ -76,16 +81,20 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from joblib import Parallel, delayed
-
     from sb3_swirl.baselines import METHODS
+    from sb3_swirl.runner import BACKENDS, run_sweep
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
     parser.add_argument("--seeds", type=int, nargs="+", default=[10, 11, 12, 13, 14])
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     parser.add_argument("--total-timesteps", type=int, default=30_000)
-    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--jobs", type=int, default=2, help="runs at once (local CPUs)")
+    parser.add_argument("--backend", default="joblib", choices=BACKENDS)
+    parser.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
+    parser.add_argument(
+        "--resume", action="store_true", help="keep the runs in OUT/runs.jsonl, run the rest"
+    )
     parser.add_argument("--quick", action="store_true", help="1 seed, 1500 steps: a smoke run")
     parser.add_argument("--out", default="results/baselines")
     args = parser.parse_args(argv)
@@ -99,8 +108,18 @@ def main(argv: list[str] | None = None) -> int:
         if not (task == "partial" and method.endswith("_model"))
         for seed in seeds
     ]
-    records = Parallel(n_jobs=args.jobs)(
-        delayed(run_one)(task, method, seed, steps, args.quick) for task, method, seed in jobs
+    path = Path(args.out)
+    records = run_sweep(
+        run_one,
+        [
+            {"task": task, "method": method, "seed": seed, "steps": steps, "quick": args.quick}
+            for task, method, seed in jobs
+        ],
+        path / "runs.jsonl",
+        backend=args.backend,
+        n_jobs=args.jobs,
+        address=args.address,
+        resume=args.resume,
     )
     out: dict[str, Any] = {"settings": vars(args), "records": records, "summary": {}}
     for task in args.tasks:
@@ -122,8 +141,6 @@ def main(argv: list[str] | None = None) -> int:
                 f"{s['final_success_mean']:>6.2f} {s['best_success_mean']:>6.2f} "
                 f"{s['wall_time_s_mean']:>7.1f}"
             )
-    path = Path(args.out)
-    path.mkdir(parents=True, exist_ok=True)
     (path / "results.json").write_text(json.dumps(out, indent=1, default=str))
     print(f"\nwrote {path / 'results.json'}")
     return 0

@@ -40,6 +40,7 @@ from sb3_swirl.plotting import (
     plot_transitions,
 )
 from sb3_swirl.rewards import MaxEntIRLRewardLearner, QuadraticRewardLearner, RewardLearner
+from sb3_swirl.runner import run_sweep
 from sb3_swirl.segmentation import (
     SegmentationWarning,
     TransitionStateClustering,
@@ -88,6 +89,7 @@ __all__ = [
     "plot_sheet",
     "plot_transitions",
     "run_method",
+    "run_sweep",
     "ruptures_indicator",
     "save_demos",
     "switch_scores",

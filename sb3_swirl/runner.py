@@ -1,0 +1,149 @@
+"""Sweeps of runs (seeds x methods x settings) on one machine or a Ray cluster.
+
+:func:`run_sweep` calls ``function(**job)`` for every job, in worker processes with joblib
+(the default) or on a Ray cluster (``backend="ray"``, the optional ``ray`` extra): the same
+experiment code either way. Each run's record is appended to a JSON-lines file as soon as it
+finishes, so an interrupted sweep resumes where it stopped (``resume=True`` skips the jobs the
+file already holds). A rich progress bar counts the runs.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from swirl_wrappers._validation import check_int, check_option
+
+__all__ = ["BACKENDS", "run_sweep"]
+
+#: ``run_sweep(backend=...)``
+BACKENDS = ("joblib", "ray")
+
+
+def _key(job: Mapping[str, Any]) -> str:
+    return json.dumps(job, sort_keys=True, default=str)
+
+
+def _call(function: Callable[..., Any], job: Mapping[str, Any]) -> tuple[dict, Any]:
+    return dict(job), function(**job)
+
+
+def _read_done(path: Path) -> dict[str, Any]:
+    """The records already in ``path`` by job; a line cut short by a crash is ignored."""
+    done: dict[str, Any] = {}
+    if not path.exists():
+        return done
+    for line in path.read_text().splitlines():
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # the last line of an interrupted write
+        done[_key(record["job"])] = record["result"]
+    return done
+
+
+def _joblib_runs(
+    function: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], n_jobs: int
+) -> Iterator[tuple[dict, Any]]:
+    from joblib import Parallel, delayed
+
+    parallel = Parallel(n_jobs=n_jobs, return_as="generator_unordered")
+    yield from parallel(delayed(_call)(function, job) for job in jobs)
+
+
+def _ray_runs(
+    function: Callable[..., Any],
+    jobs: Sequence[Mapping[str, Any]],
+    n_jobs: int,
+    address: str | None,
+) -> Iterator[tuple[dict, Any]]:
+    try:
+        import ray
+    except ImportError:
+        raise ImportError(
+            "backend='ray' needs Ray: pip install 'sb3-swirl[ray]' (or use backend='joblib')"
+        ) from None
+    started = not ray.is_initialized()
+    if started:
+        if address is None:  # a local instance with n_jobs workers
+            ray.init(num_cpus=n_jobs, include_dashboard=False, log_to_driver=False)
+        else:
+            ray.init(address=address, log_to_driver=False)
+    try:
+        remote = ray.remote(_call)
+        pending = [remote.remote(function, job) for job in jobs]
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(ready[0])
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_sweep(
+    function: Callable[..., Any],
+    jobs: Sequence[Mapping[str, Any]],
+    path: str | os.PathLike,
+    *,
+    backend: str = "joblib",
+    n_jobs: int = 2,
+    address: str | None = None,
+    resume: bool = False,
+    progress: bool = True,
+) -> list[Any]:
+    """Run ``function(**job)`` for every job; return the results in the order of ``jobs``.
+
+    Parameters
+    ----------
+    function : callable
+        Importable by name (a module-level function): it runs in other processes. Its
+        result must be JSON-serialisable.
+    jobs : sequence of mappings
+        Keyword arguments of each run (JSON-serialisable; equal mappings are one job).
+    path : path
+        JSON-lines file of ``{"job": ..., "result": ...}``, one line appended per finished run.
+    backend : {"joblib", "ray"}
+    n_jobs : int
+        Runs at once (joblib), or the CPUs of a local Ray instance.
+    address : str, optional
+        Ray cluster address (``"auto"``, ``"ray://host:10001"``); default: a local instance.
+    resume : bool
+        Keep the runs ``path`` already holds and run only the others. Without it, an existing
+        ``path`` is an error (nothing a user saved is overwritten).
+    progress : bool
+        A progress bar over the runs.
+
+    Raises
+    ------
+    ValueError
+        ``path`` exists and ``resume`` is False, or a bad ``backend`` / ``n_jobs``.
+    ImportError
+        ``backend="ray"`` without Ray installed, with the install command.
+    """
+    check_option("backend", backend, BACKENDS)
+    check_int("n_jobs", n_jobs, low=1)
+    path = Path(path)
+    if path.exists() and not resume:
+        raise ValueError(f"{path} exists: resume the sweep (--resume) or choose another output")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    done = _read_done(path)
+    unique = {_key(job): dict(job) for job in jobs}
+    pending = [job for key, job in unique.items() if key not in done]
+    if backend == "ray":
+        runs = _ray_runs(function, pending, n_jobs, address)
+    else:
+        runs = _joblib_runs(function, pending, n_jobs)
+    from rich.progress import Progress
+
+    with Progress(disable=not progress, transient=True) as bar, path.open("a") as fh:
+        task = bar.add_task(f"{len(pending)} runs ({len(done)} done before)", total=len(pending))
+        for job, result in runs:
+            line = json.dumps({"job": job, "result": result}, default=str)
+            fh.write(line + "\n")
+            fh.flush()
+            done[_key(job)] = json.loads(line)["result"]
+            bar.advance(task)
+    return [done[_key(job)] for job in jobs]
