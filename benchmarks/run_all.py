@@ -1,7 +1,8 @@
 """Run every benchmark in this folder, one after the other (``make bench``).
 
 Each benchmark prints ratios measured side by side in one run. ``--quick`` runs each in its
-smoke mode; the long sample-efficiency study runs only with ``--with-slow``.
+smoke mode; the long sample-efficiency and baseline studies run only with ``--with-slow``
+(each in its own ``results/bench/<time>/`` folder).
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 import argparse
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 HERE = Path(__file__).parent
@@ -20,18 +22,26 @@ FAST = [
     "bench_segmentation.py",
     "bench_dvrk.py",
 ]
-SLOW = ["sample_efficiency.py", "swirl_dqn_stability.py"]
+SLOW = ["sample_efficiency.py", "baselines.py", "swirl_dqn_stability.py"]
+# sweeps that keep their runs (and refuse to overwrite them): each run of this script gets its
+# own folder
+SWEEPS = {"sample_efficiency.py", "baselines.py"}
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="smoke mode of each benchmark")
-    parser.add_argument("--with-slow", action="store_true", help="also the sample-efficiency study")
+    parser.add_argument(
+        "--with-slow", action="store_true", help="also the sample-efficiency and baseline studies"
+    )
     args = parser.parse_args()
     failed = []
+    stamp = time.strftime("%Y%m%d-%H%M%S")
     for name in FAST + (SLOW if args.with_slow else []):
         print(f"\n===== {name} =====", flush=True)
         cmd = [sys.executable, str(HERE / name)] + (["--quick"] if args.quick else [])
+        if name in SWEEPS:
+            cmd += ["--out", f"results/bench/{stamp}/{Path(name).stem}"]
         if subprocess.run(cmd, check=False).returncode != 0:
             failed.append(name)
     if failed:

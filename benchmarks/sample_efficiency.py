@@ -22,18 +22,20 @@ monotone in every value, the median of those bounds bounds the true median from 
 It is unresolved when that bound is +inf. Targets on the median: parking <= 0.15 (paper) and
 <= 0.10 (this project), acrobot <= 0.3.
 
-Writes ``results/sample_efficiency/results.json``. Not a test (hours of CPU at full size).
+Writes ``results/sample_efficiency/results.json``; every run's record lands in
+``runs.jsonl`` as it finishes (:func:`sb3_swirl.runner.run_sweep`: ``--resume`` continues an
+interrupted sweep, or only summarises a finished one; ``--backend ray`` runs it on a Ray
+cluster). Not a test (hours of CPU at full size).
 
 Run: ``.venv/bin/python benchmarks/sample_efficiency.py [--quick] [--seeds 10 11 12 13 14]
-[--tasks parking acrobot] [--jobs 2] [--total-timesteps N --eval-freq M] [--out DIR]
-[--reuse]``.
+[--tasks parking acrobot] [--jobs 2] [--backend joblib|ray] [--total-timesteps N
+--eval-freq M] [--out DIR] [--resume]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import statistics
 import time
@@ -43,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from sb3_swirl.experiments import rollouts_to_success, write_results
+from sb3_swirl.runner import BACKENDS, run_sweep
 
 RATIO_TARGETS = {"parking": (0.15, 0.10), "acrobot": (0.3,)}
 ALGOS = ("swirl_dqn", "dqn")
@@ -212,7 +215,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--tasks", nargs="+", default=["parking", "acrobot"], choices=["parking", "acrobot"]
     )
-    parser.add_argument("--jobs", type=int, default=2, help="training runs at once (joblib)")
+    parser.add_argument("--jobs", type=int, default=2, help="training runs at once")
+    parser.add_argument("--backend", default="joblib", choices=BACKENDS)
+    parser.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
     parser.add_argument(
         "--total-timesteps",
         type=int,
@@ -227,33 +232,40 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--out", default="results/sample_efficiency")
     parser.add_argument(
-        "--reuse",
+        "--resume",
         action="store_true",
-        help="summarise the runs saved in --out instead of training",
+        help="keep the runs already in OUT/runs.jsonl and train only the others (all there: "
+        "only summarise them)",
     )
     args = parser.parse_args(argv)
-    from joblib import Parallel, delayed
 
     out = Path(args.out)
     name = "results_quick.json" if args.quick else "results.json"
     start = time.perf_counter()
-    if args.reuse:
-        saved = json.loads((out / name).read_text())
-        seeds = saved["seeds"]
-        records = [r for task in args.tasks for r in saved["tasks"][task]["runs"]]
-        print(f"summarising the saved runs in {out / name} (seeds {seeds})")
-    else:
-        seeds = args.seeds[:1] if args.quick else args.seeds
-        jobs = [(task, algo, seed) for task in args.tasks for seed in seeds for algo in ALGOS]
-        print(
-            f"{len(jobs)} training runs ({', '.join(args.tasks)}; seeds {seeds}), "
-            f"{args.jobs} at a time",
-            flush=True,
-        )
-        records = Parallel(n_jobs=args.jobs)(
-            delayed(run_one)(task, algo, seed, args.quick, args.total_timesteps, args.eval_freq)
-            for task, algo, seed in jobs
-        )
+    seeds = args.seeds[:1] if args.quick else args.seeds
+    jobs = [
+        {
+            "task": task,
+            "algo": algo,
+            "seed": seed,
+            "quick": args.quick,
+            "total_timesteps": args.total_timesteps,
+            "eval_freq": args.eval_freq,
+        }
+        for task in args.tasks
+        for seed in seeds
+        for algo in ALGOS
+    ]
+    print(f"{len(jobs)} training runs ({', '.join(args.tasks)}; seeds {seeds})", flush=True)
+    records = run_sweep(
+        run_one,
+        jobs,
+        out / ("runs_quick.jsonl" if args.quick else "runs.jsonl"),
+        backend=args.backend,
+        n_jobs=args.jobs,
+        address=args.address,
+        resume=args.resume,
+    )
     results: dict[str, Any] = {"seeds": seeds, "quick": args.quick, "tasks": {}}
     for task in args.tasks:
         preset, steps = _preset(task, args.quick, args.total_timesteps, args.eval_freq)
@@ -271,11 +283,7 @@ def main(argv: list[str] | None = None) -> int:
             "summary": summary,
             "runs": [r for r in records if r["task"] == task],
         }
-    if args.reuse:
-        results["training_wall_s"] = saved.get("training_wall_s")
-    else:
-        results["training_wall_s"] = time.perf_counter() - start
-    out.mkdir(parents=True, exist_ok=True)
+    results["wall_s_this_invocation"] = time.perf_counter() - start
     write_results(results, out / name)
     print(f"wrote {out / name}")
     return 0
