@@ -193,10 +193,24 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     from sb3_swirl.experiments import REPRODUCTIONS
 
     _writable_folder(Path(args.out))
+    sweep = {}
+    if args.name in SWEPT:
+        sweep = {
+            "backend": args.backend,
+            "jobs": args.jobs,
+            "address": args.address,
+            "resume": args.resume,
+        }
+    elif args.resume or args.backend != "joblib" or args.address:
+        raise ValueError(f"{args.name} is not a sweep: --backend, --address, --resume do not apply")
     REPRODUCTIONS[args.name](
-        quick=args.quick, seeds=args.seeds, out_dir=args.out, progress=not args.quiet
+        quick=args.quick, seeds=args.seeds, out_dir=args.out, progress=not args.quiet, **sweep
     )
     return 0
+
+
+#: the reproductions that fan out over sb3_swirl.runner.run_sweep
+SWEPT = ("fig2",)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -266,11 +280,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("reproduce", help="reproduce a table or figure of the paper")
-    p.add_argument("name", choices=["table1", "table2"])
+    p.add_argument("name", choices=["table1", "table2", "fig2"])
     p.add_argument("--quick", action="store_true", help="one seed, small budgets (minutes)")
     p.add_argument("--seeds", type=_seed, nargs="+", default=None, help="override the seeds")
     p.add_argument("--out", default="results", help="output folder (default results/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--jobs", type=int, default=2, help="runs at once (figures)")
+    p.add_argument("--backend", default="joblib", choices=["joblib", "ray"])
+    p.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
     p.set_defaults(func=_cmd_reproduce)
 
     p = sub.add_parser(

@@ -21,7 +21,7 @@ from rich.console import Console
 from rich.table import Table
 
 from swirl_wrappers._io import atomic_write
-from swirl_wrappers._validation import check_int
+from swirl_wrappers._validation import check_int, check_option
 
 console = Console(stderr=True)
 
@@ -755,4 +755,161 @@ def reproduce_table2(
 
 
 #: ``sb3-swirl reproduce NAME``: the experiment functions by name.
-REPRODUCTIONS = {"table1": reproduce_table1, "table2": reproduce_table2}
+#: Fig. 2's tasks: the main job's preset, demos per run and the full step budget
+FIG2_TASKS: dict[str, tuple[str, int]] = {
+    "parking": ("parking", 100_000),
+    "acrobot": ("acrobot", 60_000),
+    "underactuated_acrobot": ("acrobot", 60_000),
+}
+FIG2_METHODS = ("swirl", "dqn", "dqn_rbf")
+
+
+def _fig2_preset(task: str, quick: bool) -> Preset:
+    preset = PRESETS[FIG2_TASKS[task][0]]
+    if task == "underactuated_acrobot":
+        preset = replace(preset, env_id="sb3_swirl/UnderactuatedAcrobot-v0")
+    if quick:
+        preset = replace(preset, eval_freq=1_000, n_eval_episodes=3)
+    return preset
+
+
+def fig2_run(task: str, method: str, seed: int, steps: int, quick: bool) -> dict[str, Any]:
+    """One run of Fig. 2 (a module-level function: sweeps run it in other processes)."""
+    import torch
+
+    from sb3_swirl.baselines import run_method
+    from sb3_swirl.supervisors import collect_demos
+
+    torch.set_num_threads(1)  # tiny networks: extra threads only contend for the cores
+    preset = _fig2_preset(task, quick)
+    demos = collect_demos(preset.env_id, preset.n_demos, seed=seed)
+    record = run_method(method, preset, demos, seed=seed, total_timesteps=steps)
+    record.pop("hyperparams", None)  # classes in policy_kwargs are not JSON
+    return record
+
+
+def reproduce_fig2(
+    *,
+    quick: bool = False,
+    seeds: list[int] | None = None,
+    out_dir: str | Path = "results",
+    progress: bool = True,
+    backend: str = "joblib",
+    jobs: int = 2,
+    address: str | None = None,
+    resume: bool = False,
+    tasks: list[str] | None = None,
+) -> dict[str, Any]:
+    """The paper's Fig. 2: true success against rollouts, SWIRL vs Q-learning (DQN and the
+    paper's RBF Q-function), on parking (5 demos), the acrobot (15 demos) and the
+    under-actuated acrobot.
+
+    Runs go through :func:`sb3_swirl.runner.run_sweep` (``backend``, ``jobs``, ``address``,
+    ``resume``): each record lands in ``out_dir/fig2/runs.jsonl`` as it finishes. Writes
+    ``results.json`` (settings, every run, per task and method the median rollouts to 95%
+    success and the mean final success) and ``figure.png`` (mean success per evaluation
+    against mean rollouts, shaded between the seeds' minimum and maximum).
+
+    Parameters
+    ----------
+    quick : bool
+        One seed, 3000 steps per run, 3 evaluation episodes every 1000 steps (minutes);
+        otherwise seeds 10-14 and the full budgets of :data:`FIG2_TASKS`.
+    tasks : list of str, optional
+        A subset of :data:`FIG2_TASKS` (default: all).
+    """
+    from sb3_swirl.runner import run_sweep
+
+    tasks = list(FIG2_TASKS) if tasks is None else tasks
+    for task in tasks:
+        check_option("task", task, tuple(FIG2_TASKS))
+    seeds = ([10] if quick else [10, 11, 12, 13, 14]) if seeds is None else seeds
+    for seed in seeds:
+        check_int("seed", seed, low=0)
+    out = Path(out_dir) / "fig2"
+    out.mkdir(parents=True, exist_ok=True)
+    work = [
+        {
+            "task": task,
+            "method": method,
+            "seed": seed,
+            "steps": 3_000 if quick else steps,
+            "quick": quick,
+        }
+        for task, (_, steps) in FIG2_TASKS.items()
+        if task in tasks
+        for method in FIG2_METHODS
+        for seed in seeds
+    ]
+    console.rule(f"[bold]Fig. 2: {len(work)} runs, {backend}")
+    records = run_sweep(
+        fig2_run,
+        work,
+        out / ("runs_quick.jsonl" if quick else "runs.jsonl"),
+        backend=backend,
+        n_jobs=jobs,
+        address=address,
+        resume=resume,
+        progress=progress,
+    )
+    summary: dict[str, dict[str, Any]] = {}
+    table = Table(title="Fig. 2: rollouts to 95% true success (median over seeds)")
+    for column in ("task", "method", "rollouts to 95%", "seeds reaching it", "final success"):
+        table.add_column(column)
+    for job, record in zip(work, records, strict=True):
+        record.update(task=job["task"], seed=job["seed"])
+    for task in tasks:
+        summary[task] = {}
+        for method in FIG2_METHODS:
+            runs = [r for r in records if r["task"] == task and r["method"] == method]
+            reached = [r["rollouts_to_target"] for r in runs if r["rollouts_to_target"]]
+            median = float(np.median(reached + [np.inf] * (len(runs) - len(reached))))
+            final = float(np.mean([r["final_success"] for r in runs]))
+            summary[task][method] = {
+                "median_rollouts_to_target": None if np.isinf(median) else median,
+                "reached": f"{len(reached)}/{len(runs)}",
+                "final_success_mean": final,
+            }
+            shown = "never" if np.isinf(median) else f"{median:g}"
+            table.add_row(task, method, shown, f"{len(reached)}/{len(runs)}", f"{final:.2f}")
+    console.print(table)
+    results = {
+        "figure": "fig2",
+        "quick": quick,
+        "seeds": seeds,
+        "backend": backend,
+        "summary": summary,
+        "runs": records,
+    }
+    write_results(results, out / "results.json")
+    _plot_fig2(records, tasks, out / "figure.png")
+    console.print(f"wrote {out}/results.json, figure.png")
+    return results
+
+
+def _plot_fig2(records: list[dict[str, Any]], tasks: list[str], path: Path) -> None:
+    """One panel per task: mean true success per evaluation against mean rollouts, shaded
+    between the seeds' minimum and maximum."""
+    from sb3_swirl.plotting import _finish, _new_figure
+
+    labels = {"swirl": "SWIRL (SwirlDQN)", "dqn": "Q-learning (DQN)", "dqn_rbf": "RBF Q-learning"}
+    fig = _new_figure((5 * len(tasks), 4))
+    axes = np.atleast_1d(fig.subplots(1, len(tasks)))
+    for ax, task in zip(axes, tasks, strict=True):
+        for method in FIG2_METHODS:
+            curves = [r["curve"] for r in records if r["task"] == task and r["method"] == method]
+            n = min(len(c) for c in curves)
+            success = np.array([[p["success_rate"] for p in c[:n]] for c in curves])
+            episodes = np.array([[p["episodes"] for p in c[:n]] for c in curves]).mean(axis=0)
+            ax.plot(episodes, success.mean(axis=0), marker="o", markersize=3, label=labels[method])
+            ax.fill_between(episodes, success.min(axis=0), success.max(axis=0), alpha=0.2)
+        ax.set_title(task.replace("_", " "))
+        ax.set_xlabel("rollouts (training episodes)")
+        ax.set_ylabel("true success rate")
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best")
+    _finish(fig, path)
+
+
+REPRODUCTIONS = {"table1": reproduce_table1, "table2": reproduce_table2, "fig2": reproduce_fig2}

@@ -264,3 +264,32 @@ def test_reproduce_refuses_unknown_names_and_bad_seeds(capsys):
         with pytest.raises(SystemExit):
             main(argv)
     assert "-1" in capsys.readouterr().err
+
+
+def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
+    """A tiny Fig. 2 (parking, one seed, 3000 steps per method) through the sweep runner."""
+    from sb3_swirl.experiments import FIG2_METHODS, reproduce_fig2
+
+    kwargs = {"quick": True, "tasks": ["parking"], "out_dir": tmp_path, "progress": False}
+    results = reproduce_fig2(**kwargs)
+    assert {r["method"] for r in results["runs"]} == set(FIG2_METHODS)
+    assert (tmp_path / "fig2" / "figure.png").stat().st_size > 10_000
+    saved = json.loads((tmp_path / "fig2" / "results.json").read_text())
+    assert saved["summary"] == results["summary"]
+    swirl = saved["summary"]["parking"]["swirl"]
+    assert swirl["final_success_mean"] > 0  # SWIRL parks within 3000 steps; DQN does not
+    with pytest.raises(ValueError, match="exists: resume the sweep"):
+        reproduce_fig2(**kwargs)
+    again = reproduce_fig2(**kwargs, resume=True)  # every run done: nothing is retrained
+    assert again["summary"] == results["summary"]
+    assert main(["reproduce", "table1", "--resume", "--out", str(tmp_path)]) == 2
+
+
+@pytest.mark.slow
+def test_reproduce_fig2_quick_has_every_task_method_and_seed(tmp_path):
+    from sb3_swirl.experiments import FIG2_METHODS, FIG2_TASKS, reproduce_fig2
+
+    results = reproduce_fig2(quick=True, out_dir=tmp_path, progress=False)
+    runs = {(r["task"], r["method"], r["seed"]) for r in results["runs"]}
+    assert runs == {(t, m, 10) for t in FIG2_TASKS for m in FIG2_METHODS}
+    assert set(results["summary"]) == set(FIG2_TASKS)
