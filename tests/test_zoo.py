@@ -129,7 +129,8 @@ def test_train_enjoy_tensorboard_and_plots_swirl_dqn_and_dqn(tmp_path):
     assert dict(config)["prefill_replay"] is True
 
     # evaluations score the true reward (parking's is 1 on success, else 0), not the proxy one
-    evaluations = np.load(run / "evaluations.npz")
+    with np.load(run / "evaluations.npz") as npz:
+        evaluations = dict(npz)
     assert set(np.unique(evaluations["results"])) <= {0.0, 1.0}
     assert evaluations["successes"][-1].mean() > 0  # the cloned and trained agent parks
 
@@ -161,7 +162,8 @@ def test_yaml_for_a_plain_gymnasium_env_with_a_demo_file(tmp_path, monkeypatch):
     (tmp_path / "mine.yml").write_text(yaml.safe_dump({"MountainCar-v0": MOUNTAINCAR_ENTRY}))
     args = ["train", "--algo", "swirl_dqn", "--env", "MountainCar-v0", "-conf", "mine.yml"]
     assert zoo.main([*args, "-f", "logs", "--eval-freq", "1500", "--eval-episodes", "3"]) == 0
-    evaluations = np.load(tmp_path / "logs/swirl_dqn/MountainCar-v0_1/evaluations.npz")
+    with np.load(tmp_path / "logs/swirl_dqn/MountainCar-v0_1/evaluations.npz") as npz:
+        evaluations = dict(npz)
     # plain DQN rarely reaches the flag in 1500 steps; the cloned agent does (true reward)
     assert evaluations["ep_lengths"][-1].max() < 200
     assert evaluations["results"][-1].mean() > -200
