@@ -37,32 +37,6 @@ TASKS = {
 }
 
 
-def _preset(task: str, quick: bool) -> Any:
-    import dataclasses
-
-    from sb3_swirl.experiments import PRESETS
-
-    preset = dataclasses.replace(PRESETS["parking"], env_id=TASKS[task])
-    if quick:
-        preset = dataclasses.replace(preset, eval_freq=500, n_eval_episodes=3)
-    return preset
-
-
-def run_one(task: str, method: str, seed: int, steps: int, quick: bool) -> dict[str, Any]:
-    """One method on one seed of one task: ``run_method``'s record."""
-    import torch
-
-    torch.set_num_threads(1)  # tiny networks: extra threads only contend for the cores
-    from sb3_swirl.baselines import run_method
-    from sb3_swirl.supervisors import collect_demos
-
-    preset = _preset(task, quick)
-    demos = collect_demos(preset.env_id, preset.n_demos, seed=seed)
-    record = run_method(method, preset, demos, seed=seed, total_timesteps=steps)
-    record.pop("hyperparams", None)  # classes in policy_kwargs are not JSON
-    return record | {"task": task, "seed": seed, "total_timesteps": steps}
-
-
 def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     reached = [r["rollouts_to_target"] for r in records if r["rollouts_to_target"] is not None]
     return {
@@ -82,6 +56,7 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     from sb3_swirl.baselines import METHODS
+    from sb3_swirl.experiments import method_run
     from sb3_swirl.runner import BACKENDS, run_sweep
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -109,11 +84,13 @@ def main(argv: list[str] | None = None) -> int:
         for seed in seeds
     ]
     path = Path(args.out)
+    schedule = {"eval_freq": 500, "n_eval_episodes": 3} if args.quick else {}
     records = run_sweep(
-        run_one,
+        method_run,
         [
-            {"task": task, "method": method, "seed": seed, "steps": steps, "quick": args.quick}
-            for task, method, seed in jobs
+            {"preset": "parking", "env_id": TASKS[task], "method": m, "seed": seed, "steps": steps}
+            | schedule
+            for task, m, seed in jobs
         ],
         path / "runs.jsonl",
         backend=args.backend,
@@ -121,6 +98,8 @@ def main(argv: list[str] | None = None) -> int:
         address=args.address,
         resume=args.resume,
     )
+    for (task, _, seed), record in zip(jobs, records, strict=True):
+        record.update(task=task, seed=seed, total_timesteps=steps)
     out: dict[str, Any] = {"settings": vars(args), "records": records, "summary": {}}
     for task in args.tasks:
         print(f"\n{task} ({TASKS[task]}), {len(seeds)} seeds, {steps} steps per method")

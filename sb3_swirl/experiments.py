@@ -755,35 +755,40 @@ def reproduce_table2(
 
 
 #: ``sb3-swirl reproduce NAME``: the experiment functions by name.
-#: Fig. 2's tasks: the main job's preset, demos per run and the full step budget
-FIG2_TASKS: dict[str, tuple[str, int]] = {
-    "parking": ("parking", 100_000),
-    "acrobot": ("acrobot", 60_000),
-    "underactuated_acrobot": ("acrobot", 60_000),
+#: Fig. 2's tasks: the main job's preset, the env id and the full step budget
+FIG2_TASKS: dict[str, tuple[str, str, int]] = {
+    "parking": ("parking", "sb3_swirl/ParallelParking-v0", 100_000),
+    "acrobot": ("acrobot", "sb3_swirl/NoisyAcrobot-v0", 60_000),
+    "underactuated_acrobot": ("acrobot", "sb3_swirl/UnderactuatedAcrobot-v0", 60_000),
 }
 FIG2_METHODS = ("swirl", "dqn", "dqn_rbf")
 
 
-def _fig2_preset(task: str, quick: bool) -> Preset:
-    preset = PRESETS[FIG2_TASKS[task][0]]
-    if task == "underactuated_acrobot":
-        preset = replace(preset, env_id="sb3_swirl/UnderactuatedAcrobot-v0")
-    if quick:
-        preset = replace(preset, eval_freq=1_000, n_eval_episodes=3)
-    return preset
-
-
-def fig2_run(task: str, method: str, seed: int, steps: int, quick: bool) -> dict[str, Any]:
-    """One run of Fig. 2 (a module-level function: sweeps run it in other processes)."""
+def method_run(
+    preset: str,
+    method: str,
+    seed: int,
+    steps: int,
+    env_id: str | None = None,
+    eval_freq: int | None = None,
+    n_eval_episodes: int | None = None,
+) -> dict[str, Any]:
+    """One run of a comparison method (:func:`sb3_swirl.baselines.run_method`) on the shipped
+    task ``preset``: its supervisor's demos (``seed``), ``steps`` env steps. ``env_id`` runs it
+    on a variant of the task (its own zoo entry gives the demos and the fit), ``eval_freq`` and
+    ``n_eval_episodes`` change the evaluation schedule. Module-level and with JSON arguments
+    and result: sweeps (:func:`sb3_swirl.runner.run_sweep`) run it in other processes."""
     import torch
 
     from sb3_swirl.baselines import run_method
     from sb3_swirl.supervisors import collect_demos
 
     torch.set_num_threads(1)  # tiny networks: extra threads only contend for the cores
-    preset = _fig2_preset(task, quick)
-    demos = collect_demos(preset.env_id, preset.n_demos, seed=seed)
-    record = run_method(method, preset, demos, seed=seed, total_timesteps=steps)
+    chosen = PRESETS[preset]
+    changes = {"env_id": env_id, "eval_freq": eval_freq, "n_eval_episodes": n_eval_episodes}
+    chosen = replace(chosen, **{k: v for k, v in changes.items() if v is not None})
+    demos = collect_demos(chosen.env_id, chosen.n_demos, seed=seed)
+    record = run_method(method, chosen, demos, seed=seed, total_timesteps=steps)
     record.pop("hyperparams", None)  # classes in policy_kwargs are not JSON
     return record
 
@@ -828,22 +833,22 @@ def reproduce_fig2(
         check_int("seed", seed, low=0)
     out = Path(out_dir) / "fig2"
     out.mkdir(parents=True, exist_ok=True)
+    schedule = {"eval_freq": 1_000, "n_eval_episodes": 3} if quick else {}
+    labels = [(task, method, seed) for task in tasks for method in FIG2_METHODS for seed in seeds]
     work = [
         {
-            "task": task,
+            "preset": FIG2_TASKS[task][0],
+            "env_id": FIG2_TASKS[task][1],
             "method": method,
             "seed": seed,
-            "steps": 3_000 if quick else steps,
-            "quick": quick,
+            "steps": 3_000 if quick else FIG2_TASKS[task][2],
         }
-        for task, (_, steps) in FIG2_TASKS.items()
-        if task in tasks
-        for method in FIG2_METHODS
-        for seed in seeds
+        | schedule
+        for task, method, seed in labels
     ]
     console.rule(f"[bold]Fig. 2: {len(work)} runs, {backend}")
     records = run_sweep(
-        fig2_run,
+        method_run,
         work,
         out / ("runs_quick.jsonl" if quick else "runs.jsonl"),
         backend=backend,
@@ -856,8 +861,8 @@ def reproduce_fig2(
     table = Table(title="Fig. 2: rollouts to 95% true success (median over seeds)")
     for column in ("task", "method", "rollouts to 95%", "seeds reaching it", "final success"):
         table.add_column(column)
-    for job, record in zip(work, records, strict=True):
-        record.update(task=job["task"], seed=job["seed"])
+    for (task, _, seed), record in zip(labels, records, strict=True):
+        record.update(task=task, seed=seed)
     for task in tasks:
         summary[task] = {}
         for method in FIG2_METHODS:
