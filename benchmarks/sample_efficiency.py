@@ -74,33 +74,21 @@ def run_one(
     total_timesteps: int | None,
     eval_freq: int | None = None,
 ) -> dict:
-    """Train one method on one seed of one task; returns ``train_and_evaluate``'s record."""
-    import torch
-
-    torch.set_num_threads(1)  # tiny networks: extra threads only contend for the cores
-    import sb3_swirl.envs  # noqa: F401  (registers the envs)
-    from sb3_swirl.experiments import train_and_evaluate
+    """Train one method on one seed of one task (:func:`sb3_swirl.experiments.method_run`);
+    returns ``train_and_evaluate``'s record."""
+    from sb3_swirl.experiments import method_run
 
     preset, steps = _preset(task, quick, total_timesteps, eval_freq)
-    fitted = demos = None
-    if algo == "swirl_dqn":
-        from sb3_swirl.fitting import fit_task
-        from sb3_swirl.supervisors import collect_demos
-
-        demos = collect_demos(preset.env_id, preset.n_demos, seed=seed, progress=False)
-        fitted = fit_task(demos, random_state=seed, **preset.fit_kwargs)
-    record = train_and_evaluate(
-        algo,
-        preset,
-        task=fitted,
-        demos=demos,
-        total_timesteps=steps,
-        seed=seed,
-        progress=False,
+    method = {"swirl_dqn": "swirl", "dqn": "dqn"}[algo]
+    record = method_run(
+        task,
+        method,
+        seed,
+        steps,
+        eval_freq=preset.eval_freq,
+        n_eval_episodes=preset.n_eval_episodes,
     )
     record.update(task=task, seed=seed, total_timesteps=steps)
-    if fitted is not None:
-        record["n_segments"] = fitted.n_segments
     return record
 
 

@@ -287,9 +287,8 @@ def run_method(
         return result | {"method": method}
 
     start = time.perf_counter()
-    env = gym.make(preset.env_id)
     if method.startswith("bc_"):
-        policy = _fit_bc(method, demos, env, seed)
+        policy = _fit_bc(method, demos, gym.make(preset.env_id), seed)
         steps = episodes = 0
     else:
         policy, steps, episodes = _train_gail(demos, preset.env_id, total_timesteps, seed)
@@ -329,9 +328,7 @@ def _require_imitation(method: str) -> None:
 
 
 def _fit_bc(method: str, demos: Sequence[Demonstration], env: Any, seed: int) -> Any:
-    """A behavioural clone of the demos on the raw observations."""
-    observations = np.concatenate([d.observations[:-1] for d in demos])
-    actions = np.concatenate([np.asarray(d.actions) for d in demos])
+    """A behavioural clone of the demos on the raw observations (``env`` gives the spaces)."""
     if method == "bc_imitation":
         _require_imitation(method)
         from imitation.algorithms import bc
@@ -349,6 +346,8 @@ def _fit_bc(method: str, demos: Sequence[Demonstration], env: Any, seed: int) ->
         )
         trainer.train(n_epochs=300, progress_bar=False, log_interval=10**9)
         return trainer.policy
+    observations = np.concatenate([d.observations[:-1] for d in demos])
+    actions = np.concatenate([np.asarray(d.actions) for d in demos])
     classifier = {"bc_linear_svm": "linear_svm", "bc_rbf_svm": "svm", "bc_mlp": "mlp"}[method]
     return BCPolicy(classifier, random_state=seed).fit(observations, actions)
 

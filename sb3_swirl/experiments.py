@@ -774,9 +774,9 @@ def method_run(
     n_eval_episodes: int | None = None,
 ) -> dict[str, Any]:
     """One run of a comparison method (:func:`sb3_swirl.baselines.run_method`) on the shipped
-    task ``preset``: its supervisor's demos (``seed``), ``steps`` env steps. ``env_id`` runs it
-    on a variant of the task (its own zoo entry gives the demos and the fit), ``eval_freq`` and
-    ``n_eval_episodes`` change the evaluation schedule. Module-level and with JSON arguments
+    task ``preset``: its supervisor's demos (``seed``; none for pure exploration), ``steps``
+    env steps. ``env_id`` runs it on a variant of the task (its own zoo entry gives the demos
+    and the fit), ``eval_freq`` and ``n_eval_episodes`` change the evaluation schedule. Module-level and with JSON arguments
     and result: sweeps (:func:`sb3_swirl.runner.run_sweep`) run it in other processes."""
     import torch
 
@@ -787,7 +787,9 @@ def method_run(
     chosen = PRESETS[preset]
     changes = {"env_id": env_id, "eval_freq": eval_freq, "n_eval_episodes": n_eval_episodes}
     chosen = replace(chosen, **{k: v for k, v in changes.items() if v is not None})
-    demos = collect_demos(chosen.env_id, chosen.n_demos, seed=seed)
+    # pure exploration learns from no demos: do not run the supervisor for it
+    pure = method in ("dqn", "dqn_rbf")
+    demos = [] if pure else collect_demos(chosen.env_id, chosen.n_demos, seed=seed)
     record = run_method(method, chosen, demos, seed=seed, total_timesteps=steps)
     record.pop("hyperparams", None)  # classes in policy_kwargs are not JSON
     return record
