@@ -776,8 +776,9 @@ def method_run(
     """One run of a comparison method (:func:`sb3_swirl.baselines.run_method`) on the shipped
     task ``preset``: its supervisor's demos (``seed``; none for pure exploration), ``steps``
     env steps. ``env_id`` runs it on a variant of the task (its own zoo entry gives the demos
-    and the fit), ``eval_freq`` and ``n_eval_episodes`` change the evaluation schedule. Module-level and with JSON arguments
-    and result: sweeps (:func:`sb3_swirl.runner.run_sweep`) run it in other processes."""
+    and the fit), ``eval_freq`` and ``n_eval_episodes`` change the evaluation schedule.
+    Module-level and with JSON arguments and result: sweeps
+    (:func:`sb3_swirl.runner.run_sweep`) run it in other processes."""
     import torch
 
     from sb3_swirl.baselines import run_method
