@@ -200,6 +200,9 @@ def run_method(
     seed: int,
     total_timesteps: int,
     progress: bool = False,
+    env_kwargs: dict[str, Any] | None = None,
+    fit_kwargs: dict[str, Any] | None = None,
+    max_episodes: int | None = None,
 ) -> dict[str, Any]:
     """Fit ``method`` on ``demos``, train it for ``total_timesteps`` env steps (RL methods) and
     evaluate its true success, in the result format of
@@ -218,6 +221,16 @@ def run_method(
         With actions (every method but ``swirl`` clones or imitates them).
     seed : int
     total_timesteps : int
+    progress : bool, default False
+    env_kwargs : dict, optional
+        ``gym.make`` arguments of the env learned on and evaluated on (the demos may come from
+        another: transfer, §9.6).
+    fit_kwargs : dict, optional
+        :func:`~sb3_swirl.fit_task` settings over the preset's (e.g. ``{"indicator":
+        "velocity"}``).
+    max_episodes : int, optional
+        Stop the DQN-based methods after this many training episodes (the paper's budgets are in
+        rollouts), or at ``total_timesteps``, whichever comes first.
     """
     import time
 
@@ -233,11 +246,18 @@ def run_method(
         raise ValueError(f"unknown method {method!r}; choose from {sorted(METHODS)}")
     if method != "swirl":
         _needs_actions(method, demos)
-    budget = {"total_timesteps": total_timesteps, "seed": seed, "progress": progress}
-    fit = {"random_state": seed, **preset.fit_kwargs}
+    env_kwargs = dict(env_kwargs or {})
+    budget = {
+        "total_timesteps": total_timesteps,
+        "seed": seed,
+        "progress": progress,
+        "env_kwargs": env_kwargs,
+        "max_episodes": max_episodes,
+    }
+    fit = {"random_state": seed, **preset.fit_kwargs, **(fit_kwargs or {})}
 
     def known_model() -> Any:
-        env = gym.make(preset.env_id).unwrapped
+        env = gym.make(preset.env_id, **env_kwargs).unwrapped
         if not hasattr(env, "noise_free_step"):
             raise ValueError(f"method {method!r} needs a known model; {preset.env_id} has none")
         return env.noise_free_step
@@ -288,11 +308,13 @@ def run_method(
 
     start = time.perf_counter()
     if method.startswith("bc_"):
-        policy = _fit_bc(method, demos, gym.make(preset.env_id), seed)
+        policy = _fit_bc(method, demos, gym.make(preset.env_id, **env_kwargs), seed)
         steps = episodes = 0
     else:
-        policy, steps, episodes = _train_gail(demos, preset.env_id, total_timesteps, seed)
-    eval_env = gym.make(preset.env_id)
+        policy, steps, episodes = _train_gail(
+            demos, preset.env_id, total_timesteps, seed, env_kwargs
+        )
+    eval_env = gym.make(preset.env_id, **env_kwargs)
     success, task_return = evaluate_true_success(
         policy, eval_env, preset.n_eval_episodes, seed + 10_000
     )
@@ -353,7 +375,11 @@ def _fit_bc(method: str, demos: Sequence[Demonstration], env: Any, seed: int) ->
 
 
 def _train_gail(
-    demos: Sequence[Demonstration], env_id: str, total_timesteps: int, seed: int
+    demos: Sequence[Demonstration],
+    env_id: str,
+    total_timesteps: int,
+    seed: int,
+    env_kwargs: dict[str, Any],
 ) -> tuple[Any, int, int]:
     """GAIL (imitation) with a PPO generator for ``total_timesteps`` env steps."""
     _require_imitation("gail")
@@ -377,6 +403,7 @@ def _train_gail(
         env_id,
         rng=np.random.default_rng(seed),
         n_envs=n_envs,
+        env_make_kwargs=env_kwargs,
         post_wrappers=[lambda env, _: _EpisodeCounter(RolloutInfoWrapper(env))],
     )
     learner = PPO("MlpPolicy", venv, batch_size=64, n_steps=n_steps, seed=seed, verbose=0)

@@ -13,7 +13,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from sb3_swirl.experiments import PRESETS
+from sb3_swirl.experiments import PRESETS, REPRODUCTIONS
 
 console = Console(stderr=True)
 
@@ -190,27 +190,34 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
-    from sb3_swirl.experiments import REPRODUCTIONS
+    from sb3_swirl.experiments import EXPERIMENTS, reproduce_all
 
     _writable_folder(Path(args.out))
-    sweep = {}
-    if args.name in SWEPT:
-        sweep = {
-            "backend": args.backend,
-            "jobs": args.jobs,
-            "address": args.address,
-            "resume": args.resume,
-        }
-    elif args.resume or args.backend != "joblib" or args.address:
+    swept = args.name in EXPERIMENTS or args.name == "all"
+    sweep = {"backend": args.backend, "jobs": args.jobs, "address": args.address}
+    if not swept and (args.resume or args.backend != "joblib" or args.address):
         raise ValueError(f"{args.name} is not a sweep: --backend, --address, --resume do not apply")
-    REPRODUCTIONS[args.name](
-        quick=args.quick, seeds=args.seeds, out_dir=args.out, progress=not args.quiet, **sweep
-    )
+    if args.name != "fig9" and args.repeats is not None:
+        raise ValueError("--repeats is Fig. 9's (random demo sets)")
+    if args.panels and args.name not in EXPERIMENTS:
+        raise ValueError(f"--panels applies to the figures, not to {args.name}")
+    common = {"quick": args.quick, "out_dir": args.out, "progress": not args.quiet}
+    if args.name == "all":
+        if args.seeds:
+            raise ValueError("--seeds applies to one table or figure, not to all")
+        reproduce_all(**common, **sweep, resume=args.resume)
+    elif swept:
+        REPRODUCTIONS[args.name](
+            **common,
+            **sweep,
+            seeds=args.seeds,
+            resume=args.resume,
+            panels=args.panels,
+            repeats=args.repeats,
+        )
+    else:
+        REPRODUCTIONS[args.name](**common, seeds=args.seeds)
     return 0
-
-
-#: the reproductions that fan out over sb3_swirl.runner.run_sweep
-SWEPT = ("fig2",)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -280,7 +287,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("reproduce", help="reproduce a table or figure of the paper")
-    p.add_argument("name", choices=["table1", "table2", "fig2"])
+    p.add_argument(
+        "name",
+        choices=[*REPRODUCTIONS, "all"],
+        metavar="NAME",
+        help=", ".join([*REPRODUCTIONS, "all"]),
+    )
     p.add_argument("--quick", action="store_true", help="one seed, small budgets (minutes)")
     p.add_argument("--seeds", type=_seed, nargs="+", default=None, help="override the seeds")
     p.add_argument("--out", default="results", help="output folder (default results/)")
@@ -289,6 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--backend", default="joblib", choices=["joblib", "ray"])
     p.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
     p.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
+    p.add_argument("--panels", nargs="+", default=None, help="a subset of a figure's panels")
+    p.add_argument("--repeats", type=int, default=None, help="fig9: random demo sets (default 20)")
     p.set_defaults(func=_cmd_reproduce)
 
     p = sub.add_parser(

@@ -8,8 +8,10 @@ rl-zoo share one tuned set.
 from __future__ import annotations
 
 import json
+import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
@@ -754,16 +756,7 @@ def reproduce_table2(
     return results
 
 
-#: ``sb3-swirl reproduce NAME``: the experiment functions by name.
-#: Fig. 2's tasks: the main job's preset, the env id and the full step budget
-FIG2_TASKS: dict[str, tuple[str, str, int]] = {
-    "parking": ("parking", "sb3_swirl/ParallelParking-v0", 100_000),
-    "acrobot": ("acrobot", "sb3_swirl/NoisyAcrobot-v0", 60_000),
-    "underactuated_acrobot": ("acrobot", "sb3_swirl/UnderactuatedAcrobot-v0", 60_000),
-}
-FIG2_METHODS = ("swirl", "dqn", "dqn_rbf")
-
-
+# ---------------------------------------------------------------------- the paper's figures
 def method_run(
     preset: str,
     method: str,
@@ -772,12 +765,21 @@ def method_run(
     env_id: str | None = None,
     eval_freq: int | None = None,
     n_eval_episodes: int | None = None,
+    n_demos: int | None = None,
+    demo_env_id: str | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+    fit: dict[str, Any] | None = None,
+    max_episodes: int | None = None,
 ) -> dict[str, Any]:
     """One run of a comparison method (:func:`sb3_swirl.baselines.run_method`) on the shipped
-    task ``preset``: its supervisor's demos (``seed``; none for pure exploration), ``steps``
-    env steps. ``env_id`` runs it on a variant of the task (its own zoo entry gives the demos
-    and the fit), ``eval_freq`` and ``n_eval_episodes`` change the evaluation schedule.
-    Module-level and with JSON arguments and result: sweeps
+    task ``preset``: ``n_demos`` (default: the task's) of its supervisor's demos (``seed``;
+    none for pure exploration), ``steps`` env steps.
+
+    ``env_id`` runs it on a variant of the task (its own zoo entry gives the demos and the
+    fit), ``demo_env_id`` takes the demos from another variant (transfer), ``env_kwargs`` go
+    to ``gym.make`` of the env learned on, ``fit`` over the fit settings, ``max_episodes``
+    stops training after that many rollouts, ``eval_freq`` and ``n_eval_episodes`` change
+    the evaluation schedule. Module-level and with JSON arguments and result: sweeps
     (:func:`sb3_swirl.runner.run_sweep`) run it in other processes."""
     import torch
 
@@ -790,13 +792,319 @@ def method_run(
     chosen = replace(chosen, **{k: v for k, v in changes.items() if v is not None})
     # pure exploration learns from no demos: do not run the supervisor for it
     pure = method in ("dqn", "dqn_rbf")
-    demos = [] if pure else collect_demos(chosen.env_id, chosen.n_demos, seed=seed)
-    record = run_method(method, chosen, demos, seed=seed, total_timesteps=steps)
+    n = chosen.n_demos if n_demos is None else n_demos
+    demo_env = chosen.env_id if demo_env_id is None else demo_env_id
+    demos = [] if pure else collect_demos(demo_env, n, seed=seed, **chosen.demo_env_kwargs)
+    record = run_method(
+        method,
+        chosen,
+        demos,
+        seed=seed,
+        total_timesteps=steps,
+        env_kwargs=env_kwargs,
+        fit_kwargs=fit,
+        max_episodes=max_episodes,
+    )
     record.pop("hyperparams", None)  # classes in policy_kwargs are not JSON
     return record
 
 
-def reproduce_fig2(
+@dataclass(frozen=True)
+class Panel:
+    """One panel of a paper figure: a task, its budget and what is swept on it.
+
+    ``run`` holds :func:`method_run` arguments for every run of the panel (``quick_run`` over
+    them in ``--quick``), ``by_method`` per method label. ``values`` are the swept points
+    ``(x, method_run arguments)`` of a figure whose x axis is not rollouts (empty: learning
+    curves); ``quick_values`` the subset ``--quick`` runs.
+    """
+
+    title: str
+    preset: str
+    env_id: str
+    steps: int
+    run: dict[str, Any] = field(default_factory=dict)
+    quick_run: dict[str, Any] = field(default_factory=dict)
+    by_method: dict[str, dict[str, Any]] = field(default_factory=dict)
+    values: tuple[tuple[Any, dict[str, Any]], ...] = ()
+    quick_values: tuple[Any, ...] = ()
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A figure of the paper's §9: panels × methods × seeds (× swept values).
+
+    ``methods`` maps a label to :func:`method_run` arguments (at least ``method``).
+    ``spread`` shades the seeds' ``"range"`` (min to max) or ``"2std"`` (mean ± 2 std, Fig. 9).
+    """
+
+    name: str
+    title: str
+    claim: str
+    panels: dict[str, Panel]
+    methods: dict[str, dict[str, Any]]
+    x_label: str = "rollouts (training episodes)"
+    #: held-out seeds: the shipped zoo entries were tuned on seeds 0-9
+    seeds: tuple[int, ...] = (10, 11, 12, 13, 14)
+    spread: str = "range"
+    #: how many of ``seeds`` ``--quick`` runs
+    quick_seeds: int = 1
+
+
+#: ``--quick``'s budget and evaluation schedule
+_QUICK = {"steps": 3_000, "eval_freq": 1_000, "n_eval_episodes": 3}
+_PARKING, _ACROBOT = "sb3_swirl/ParallelParking-v0", "sb3_swirl/NoisyAcrobot-v0"
+_UNDERACTUATED = "sb3_swirl/UnderactuatedAcrobot-v0"
+#: the labels of the plots and tables
+METHOD_LABELS = {
+    "swirl": "SWIRL",
+    "swirl_maxent": "SWIRL, MaxEnt rewards (est. dynamics)",
+    "swirl_maxent_model": "SWIRL, MaxEnt rewards (true dynamics)",
+    "dqn": "Q-learning (DQN)",
+    "dqn_rbf": "RBF Q-learning",
+    "bc_linear_svm": "linear SVM",
+    "bc_rbf_svm": "RBF SVM",
+    "qinit": "Q-init",
+    "global_irl": "IRL (est. dynamics)",
+    "global_irl_model": "IRL (true dynamics)",
+    "swirl_gmm": "SWIRL, GMM",
+    "swirl_velocity": "SWIRL, velocity",
+    "swirl_linear": "SWIRL, linear dynamics",
+}
+
+
+def _curve_panels(parking: int, acrobot: int, **run: Any) -> dict[str, Panel]:
+    """Parking (5 demos) and both acrobots (15 demos) with these step budgets."""
+    return {
+        "parking": Panel("parking, 5 demos", "parking", _PARKING, parking, run=run),
+        "acrobot": Panel("acrobot, 15 demos", "acrobot", _ACROBOT, acrobot, run=run),
+        "underactuated_acrobot": Panel(
+            "under-actuated acrobot, 15 demos", "acrobot", _UNDERACTUATED, acrobot, run=run
+        ),
+    }
+
+
+def _methods(*names: str, **variants: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    return {name: {"method": name} for name in names} | variants
+
+
+_LONG_RL = {"steps": 1_000_000, "eval_freq": 5_000}  # Fig. 2's pure RL on parking
+_LINKS = tuple(
+    (length, {"env_kwargs": {"link_length_2": length}}) for length in (1.0, 1.25, 1.5, 1.75, 2.0)
+)
+EXPERIMENTS: dict[str, Experiment] = {
+    "fig2": Experiment(
+        "fig2",
+        "Fig. 2: SWIRL vs Q-learning",
+        "SWIRL needs far fewer rollouts than Q-learning (parking: about 0.15 of them)",
+        {
+            **_curve_panels(100_000, 60_000),
+            "parking": Panel(
+                "parking, 5 demos",
+                "parking",
+                _PARKING,
+                100_000,
+                by_method={"dqn": _LONG_RL, "dqn_rbf": _LONG_RL},
+            ),
+        },
+        _methods("swirl", "dqn", "dqn_rbf"),
+    ),
+    "fig3": Experiment(
+        "fig3",
+        "Fig. 3: SWIRL vs behavioural cloning (SVM) against the number of demos",
+        "BC-SVM needs more than 10 times as many demos as SWIRL to be competitive",
+        {
+            "parking": Panel(
+                "parking, 500 rollouts",
+                "parking",
+                _PARKING,
+                100_000,
+                run={"max_episodes": 500},
+                values=tuple((n, {"n_demos": n}) for n in (2, 5, 10, 20, 50)),
+                quick_values=(2, 5),
+            ),
+            **{
+                name: Panel(
+                    f"{title}, 3000 rollouts (at most 60k steps)",
+                    "acrobot",
+                    env_id,
+                    60_000,
+                    run={"max_episodes": 3_000},
+                    values=tuple((n, {"n_demos": n}) for n in (2, 5, 15, 50)),
+                    quick_values=(2, 5),
+                )
+                for name, title, env_id in (
+                    ("acrobot", "acrobot", _ACROBOT),
+                    ("underactuated_acrobot", "under-actuated acrobot", _UNDERACTUATED),
+                )
+            },
+        },
+        _methods("swirl", "bc_linear_svm", "bc_rbf_svm"),
+        x_label="demonstrations",
+    ),
+    "fig4": Experiment(
+        "fig4",
+        "Fig. 4: SWIRL vs other hybrids",
+        "SWIRL is the most sample-efficient; Q-init is no better than Q-learning; "
+        "IRL beats Q-learning on parking",
+        _curve_panels(60_000, 60_000),
+        _methods("swirl", "qinit", "global_irl", "dqn"),
+    ),
+    "fig5": Experiment(
+        "fig5",
+        "Fig. 5: true vs estimated dynamics",
+        "IRL and SWIRL both learn significantly faster with the true dynamics",
+        _curve_panels(60_000, 60_000),
+        _methods("swirl_maxent", "swirl_maxent_model", "global_irl", "global_irl_model"),
+    ),
+    "fig6": Experiment(
+        "fig6",
+        "Fig. 6: transition indicators",
+        "the GMM indicator is the most reliable across the domains",
+        _curve_panels(60_000, 60_000),
+        {
+            f"swirl_{name}": {"method": "swirl", "fit": {"indicator": name}}
+            for name in ("gmm", "velocity", "linear")
+        },
+    ),
+    "fig7": Experiment(
+        "fig7",
+        "Fig. 7: parking transfer to perturbed dynamics (100 demos, 500 rollouts)",
+        "the SVM parks 95% on the standard car and never on the perturbed one; IRL transfers; "
+        "model-free SWIRL drops 16%",
+        {
+            "parking": Panel(
+                "parking, demos on the standard car",
+                "parking",
+                _PARKING,
+                100_000,
+                run={"n_demos": 100, "max_episodes": 500, "demo_env_id": _PARKING},
+                quick_run={"n_demos": 20},
+                values=(
+                    ("standard", {}),
+                    ("perturbed", {"env_id": "sb3_swirl/ParallelParkingPerturbed-v0"}),
+                ),
+                quick_values=("standard", "perturbed"),
+            )
+        },
+        _methods("dqn", "bc_linear_svm", "bc_rbf_svm", "global_irl", "swirl"),
+        x_label="dynamics the agent learns and is evaluated on",
+    ),
+    "fig8": Experiment(
+        "fig8",
+        "Fig. 8: acrobot transfer against link-2 length (250 demos, 3000 rollouts)",
+        "the SVM fails as soon as the link changes; SWIRL holds until the change is large",
+        {
+            name: Panel(
+                f"{title}, demos with a 1 m link",
+                "acrobot",
+                env_id,
+                60_000,
+                run={"n_demos": 250, "max_episodes": 3_000},
+                quick_run={"n_demos": 30},
+                values=_LINKS,
+                quick_values=(1.0, 1.5),
+            )
+            for name, title, env_id in (
+                ("acrobot", "acrobot", _ACROBOT),
+                ("underactuated_acrobot", "under-actuated acrobot", _UNDERACTUATED),
+            )
+        },
+        _methods("dqn", "bc_rbf_svm", "global_irl", "swirl"),
+        x_label="length of link 2 [m]",
+        seeds=(10, 11, 12),
+    ),
+    "fig9": Experiment(
+        "fig9",
+        "Fig. 9: sensitivity to the demo set (mean ± 2 std)",
+        "SWIRL is not very sensitive to the demo set: the 2-std band is narrower than its "
+        "gain over Q-learning",
+        _curve_panels(30_000, 60_000),
+        _methods("swirl"),
+        seeds=tuple(range(100, 120)),
+        spread="2std",
+        quick_seeds=3,
+    ),
+    "fig10": Experiment(
+        "fig10",
+        "Fig. 10: partial-observation parking (velocity hidden), 5 demos",
+        "after 250k steps model-based SWIRL parks 95%, Q-learning < 10%, MaxEnt-IRL 0%, SVM 0%",
+        {
+            "parking_partial": Panel(
+                "parking, velocity hidden",
+                "parking",
+                "sb3_swirl/ParallelParkingPartial-v0",
+                250_000,
+                run={"eval_freq": 5_000},
+            )
+        },
+        _methods("swirl", "swirl_maxent", "dqn", "global_irl", "bc_linear_svm"),
+    ),
+}
+
+
+def _jobs(
+    experiment: Experiment, panels: list[str], seeds: list[int], quick: bool
+) -> tuple[list[tuple[str, str, Any, int]], list[dict[str, Any]]]:
+    """The labels ``(panel, method label, x, seed)`` and :func:`method_run` arguments of
+    every run (only the arguments that differ from the defaults, so a job is the same
+    mapping in every version that runs it the same way: ``--resume`` finds it)."""
+    labels, work = [], []
+    for name in panels:
+        panel = experiment.panels[name]
+        points = panel.values or ((None, {}),)
+        if quick and panel.values:
+            points = tuple(p for p in points if p[0] in panel.quick_values)
+        for label, args in experiment.methods.items():
+            for x, swept in points:
+                for seed in seeds:
+                    job = {
+                        "preset": panel.preset,
+                        "env_id": panel.env_id,
+                        "method": args["method"],
+                        "seed": seed,
+                        "steps": panel.steps,
+                        **{k: v for k, v in args.items() if k != "method"},
+                        **panel.run,
+                        **panel.by_method.get(label, {}),
+                        **swept,
+                    }
+                    if quick:
+                        job |= panel.quick_run | _QUICK
+                    labels.append((name, label, x, seed))
+                    work.append(job)
+    return labels, work
+
+
+def _summary(experiment: Experiment, runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per panel, method and swept value: the seeds' final success (mean, std), best success,
+    median rollouts to the target (never: None) and how many seeds reached it."""
+    rows = []
+    groups: dict[tuple[str, str, Any], list[dict[str, Any]]] = {}
+    for run in runs:
+        groups.setdefault((run["panel"], run["label"], run["x"]), []).append(run)
+    for (panel, label, x), group in groups.items():
+        finals = [r["final_success"] for r in group]
+        reached = [r["rollouts_to_target"] for r in group if r["rollouts_to_target"] is not None]
+        median = float(np.median(reached + [np.inf] * (len(group) - len(reached))))
+        rows.append(
+            {
+                "panel": panel,
+                "method": label,
+                "x": x,
+                "seeds": len(group),
+                "final_success_mean": float(np.mean(finals)),
+                "final_success_std": float(np.std(finals)),
+                "best_success_mean": float(np.mean([r["best_success"] for r in group])),
+                "median_rollouts_to_target": None if np.isinf(median) else median,
+                "reached_target": len(reached),
+            }
+        )
+    return rows
+
+
+def reproduce(
+    name: str,
     *,
     quick: bool = False,
     seeds: list[int] | None = None,
@@ -806,50 +1114,50 @@ def reproduce_fig2(
     jobs: int = 2,
     address: str | None = None,
     resume: bool = False,
-    tasks: list[str] | None = None,
+    panels: list[str] | None = None,
+    repeats: int | None = None,
 ) -> dict[str, Any]:
-    """The paper's Fig. 2: true success against rollouts, SWIRL vs Q-learning (DQN and the
-    paper's RBF Q-function), on parking (5 demos), the acrobot (15 demos) and the
-    under-actuated acrobot.
+    """Reproduce a figure of the paper's §9 (:data:`EXPERIMENTS`): every panel × method ×
+    seed (× swept value) is a :func:`method_run`, fanned out by
+    :func:`sb3_swirl.runner.run_sweep`.
 
-    Runs go through :func:`sb3_swirl.runner.run_sweep` (``backend``, ``jobs``, ``address``,
-    ``resume``): each record lands in ``out_dir/fig2/runs.jsonl`` as it finishes. Writes
-    ``results.json`` (settings, every run, per task and method the median rollouts to 95%
-    success and the mean final success) and ``figure.png`` (mean success per evaluation
-    against mean rollouts, shaded between the seeds' minimum and maximum).
+    Each record lands in ``out_dir/NAME/runs.jsonl`` (``runs_quick.jsonl``) as it finishes,
+    so an interrupted sweep resumes (``resume``). Then writes ``results.json`` (the settings,
+    the paper's claim, every run with its curve, and the summary of :func:`_summary`) and
+    ``figure.png`` (one panel per task: mean true success against rollouts, or against the
+    swept value, shaded over the seeds), and prints the summary table.
 
     Parameters
     ----------
+    name : str
+        A key of :data:`EXPERIMENTS` ("fig2" ... "fig10").
     quick : bool
-        One seed, 3000 steps per run, 3 evaluation episodes every 1000 steps (minutes);
-        otherwise seeds 10-14 and the full budgets of :data:`FIG2_TASKS`.
-    tasks : list of str, optional
-        A subset of :data:`FIG2_TASKS` (default: all).
+        One seed (Fig. 9: three), 3000 steps, 3 evaluation episodes every 1000 steps, fewer
+        demos and swept values (minutes); otherwise the full setting of :data:`EXPERIMENTS`.
+    seeds : list of int, optional
+        Instead of the experiment's (held-out seeds: the presets were tuned on 0-9).
+    panels : list of str, optional
+        A subset of the experiment's panels.
+    repeats : int, optional
+        Demo sets of Fig. 9 (seeds 100, 101, ...; the paper used 100, the full setting 20).
+    backend, jobs, address : see :func:`sb3_swirl.runner.run_sweep`
     """
     from sb3_swirl.runner import run_sweep
 
-    tasks = list(FIG2_TASKS) if tasks is None else tasks
-    for task in tasks:
-        check_option("task", task, tuple(FIG2_TASKS))
-    seeds = ([10] if quick else [10, 11, 12, 13, 14]) if seeds is None else seeds
+    experiment = EXPERIMENTS[check_option("experiment", name, tuple(EXPERIMENTS))]
+    panels = list(experiment.panels) if panels is None else panels
+    for panel in panels:
+        check_option("panel", panel, tuple(experiment.panels))
+    if repeats is not None:
+        seeds = list(range(100, 100 + check_int("repeats", repeats, low=2)))
+    if seeds is None:
+        seeds = list(experiment.seeds[: experiment.quick_seeds] if quick else experiment.seeds)
     for seed in seeds:
         check_int("seed", seed, low=0)
-    out = Path(out_dir) / "fig2"
+    out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
-    schedule = {"eval_freq": 1_000, "n_eval_episodes": 3} if quick else {}
-    labels = [(task, method, seed) for task in tasks for method in FIG2_METHODS for seed in seeds]
-    work = [
-        {
-            "preset": FIG2_TASKS[task][0],
-            "env_id": FIG2_TASKS[task][1],
-            "method": method,
-            "seed": seed,
-            "steps": 3_000 if quick else FIG2_TASKS[task][2],
-        }
-        | schedule
-        for task, method, seed in labels
-    ]
-    console.rule(f"[bold]Fig. 2: {len(work)} runs, {backend}")
+    labels, work = _jobs(experiment, panels, seeds, quick)
+    console.rule(f"[bold]{experiment.title}: {len(work)} runs, {backend}")
     records = run_sweep(
         method_run,
         work,
@@ -860,64 +1168,125 @@ def reproduce_fig2(
         resume=resume,
         progress=progress,
     )
-    summary: dict[str, dict[str, Any]] = {}
-    table = Table(title="Fig. 2: rollouts to 95% true success (median over seeds)")
-    for column in ("task", "method", "rollouts to 95%", "seeds reaching it", "final success"):
-        table.add_column(column)
-    for (task, _, seed), record in zip(labels, records, strict=True):
-        record.update(task=task, seed=seed)
-    for task in tasks:
-        summary[task] = {}
-        for method in FIG2_METHODS:
-            runs = [r for r in records if r["task"] == task and r["method"] == method]
-            reached = [r["rollouts_to_target"] for r in runs if r["rollouts_to_target"]]
-            median = float(np.median(reached + [np.inf] * (len(runs) - len(reached))))
-            final = float(np.mean([r["final_success"] for r in runs]))
-            summary[task][method] = {
-                "median_rollouts_to_target": None if np.isinf(median) else median,
-                "reached": f"{len(reached)}/{len(runs)}",
-                "final_success_mean": final,
-            }
-            shown = "never" if np.isinf(median) else f"{median:g}"
-            table.add_row(task, method, shown, f"{len(reached)}/{len(runs)}", f"{final:.2f}")
-    console.print(table)
+    runs = [
+        {"panel": panel, "label": label, "x": x, "seed": seed, "job": job} | record
+        for (panel, label, x, seed), job, record in zip(labels, work, records, strict=True)
+    ]
+    summary = _summary(experiment, runs)
+    _print_summary(experiment, summary)
     results = {
-        "figure": "fig2",
+        "figure": name,
+        "title": experiment.title,
+        "paper_claim": experiment.claim,
         "quick": quick,
         "seeds": seeds,
         "backend": backend,
         "summary": summary,
-        "runs": records,
+        "runs": runs,
     }
     write_results(results, out / "results.json")
-    _plot_fig2(records, tasks, out / "figure.png")
-    console.print(f"wrote {out}/results.json, figure.png")
+    _plot_experiment(experiment, panels, runs, out / "figure.png")
+    console.print(f"paper: {experiment.claim}\nwrote {out}/results.json, figure.png")
     return results
 
 
-def _plot_fig2(records: list[dict[str, Any]], tasks: list[str], path: Path) -> None:
-    """One panel per task: mean true success per evaluation against mean rollouts, shaded
-    between the seeds' minimum and maximum."""
+def _print_summary(experiment: Experiment, summary: list[dict[str, Any]]) -> None:
+    swept = any(row["x"] is not None for row in summary)
+    table = Table(title=f"{experiment.title} (true success over the seeds)")
+    columns = ["panel", "method"] + (["x"] if swept else [])
+    columns += ["seeds", "final success", "rollouts to 95% (median)", "seeds reaching 95%"]
+    for column in columns:
+        table.add_column(column)
+    for row in summary:
+        rollouts = row["median_rollouts_to_target"]
+        table.add_row(
+            row["panel"],
+            METHOD_LABELS.get(row["method"], row["method"]),
+            *([str(row["x"])] if swept else []),
+            str(row["seeds"]),
+            f"{row['final_success_mean']:.2f} ± {row['final_success_std']:.2f}",
+            "never" if rollouts is None else f"{rollouts:g}",
+            f"{row['reached_target']}/{row['seeds']}",
+        )
+    Console(width=None if sys.stdout.isatty() else 160).print(table)
+
+
+def _band(values: np.ndarray, spread: str) -> tuple[np.ndarray, np.ndarray]:
+    if spread == "2std":
+        mean, std = values.mean(axis=0), values.std(axis=0)
+        return np.clip(mean - 2 * std, 0, 1), np.clip(mean + 2 * std, 0, 1)
+    return values.min(axis=0), values.max(axis=0)
+
+
+def _plot_experiment(
+    experiment: Experiment, panels: list[str], runs: list[dict[str, Any]], path: Path
+) -> None:
+    """One subplot per panel, like the paper's figures: true success against rollouts (a
+    line per method, shaded over the seeds; behavioural cloning, which takes none, as a
+    dashed level), or against the swept value (lines; bars for named settings)."""
     from sb3_swirl.plotting import _finish, _new_figure
 
-    labels = {"swirl": "SWIRL (SwirlDQN)", "dqn": "Q-learning (DQN)", "dqn_rbf": "RBF Q-learning"}
-    fig = _new_figure((5 * len(tasks), 4))
-    axes = np.atleast_1d(fig.subplots(1, len(tasks)))
-    for ax, task in zip(axes, tasks, strict=True):
-        for method in FIG2_METHODS:
-            curves = [r["curve"] for r in records if r["task"] == task and r["method"] == method]
+    fig = _new_figure((max(5.5 * len(panels), 8.0), 4.4))
+    axes = np.atleast_1d(fig.subplots(1, len(panels)))
+    for ax, name in zip(axes, panels, strict=True):
+        mine = [r for r in runs if r["panel"] == name]
+        xs = list(dict.fromkeys(r["x"] for r in mine))
+        named = any(isinstance(x, str) for x in xs)
+        width = 0.8 / len(experiment.methods)
+        for i, label in enumerate(experiment.methods):
+            these = [r for r in mine if r["label"] == label]
+            text = METHOD_LABELS.get(label, label)
+            style = {"color": f"C{i}", "marker": "osD^v"[i % 5], "markersize": 4}
+            if xs != [None]:  # success after the budget against the swept value
+                finals = [[r["final_success"] for r in these if r["x"] == x] for x in xs]
+                mean = np.array([np.mean(f) for f in finals])
+                low, high = (np.array([b(f) for f in finals]) for b in (np.min, np.max))
+                if named:
+                    where = np.arange(len(xs)) + (i - (len(experiment.methods) - 1) / 2) * width
+                    bars = {"yerr": [mean - low, high - mean], "color": f"C{i}", "label": text}
+                    ax.bar(where, mean, width, **bars)
+                else:
+                    ax.plot(xs, mean, label=text, **style)
+                    ax.fill_between(xs, low, high, color=f"C{i}", alpha=0.15)
+                continue
+            curves = [r["curve"] for r in these]
             n = min(len(c) for c in curves)
             success = np.array([[p["success_rate"] for p in c[:n]] for c in curves])
             episodes = np.array([[p["episodes"] for p in c[:n]] for c in curves]).mean(axis=0)
-            ax.plot(episodes, success.mean(axis=0), marker="o", markersize=3, label=labels[method])
-            ax.fill_between(episodes, success.min(axis=0), success.max(axis=0), alpha=0.2)
-        ax.set_title(task.replace("_", " "))
-        ax.set_xlabel("rollouts (training episodes)")
+            if n == 1:  # behavioural cloning: no rollouts
+                ax.axhline(success.mean(), linestyle="--", color=f"C{i}", label=text)
+                continue
+            ax.plot(episodes, success.mean(axis=0), label=text, **style)
+            band = _band(success, experiment.spread)
+            ax.fill_between(episodes, *band, color=f"C{i}", alpha=0.15)
+        if named:
+            ax.set_xticks(np.arange(len(xs)), xs)
+        elif xs != [None]:
+            ax.set_xticks(xs)
+        ax.set_title(experiment.panels[name].title)
+        ax.set_xlabel(experiment.x_label)
         ax.set_ylabel("true success rate")
-        ax.set_ylim(-0.02, 1.02)
+        ax.set_ylim(-0.02, 1.05)
         ax.grid(alpha=0.3)
-        ax.legend(loc="best")
+        ax.legend(loc="best", fontsize="small")
+    fig.suptitle(experiment.title, fontsize="medium")
     _finish(fig, path)
 
 
-REPRODUCTIONS = {"table1": reproduce_table1, "table2": reproduce_table2, "fig2": reproduce_fig2}
+def reproduce_all(*, quick: bool = False, out_dir: str | Path = "results", **sweep: Any) -> dict:
+    """Every table and figure, one after the other (each in its own ``out_dir/NAME/``);
+    ``sweep`` (``jobs``, ``backend``, ``address``, ``resume``, ``progress``) goes to each.
+    Returns ``{name: results}``."""
+    progress = sweep.pop("progress", True)
+    results = {}
+    for name in ("table1", "table2"):
+        results[name] = REPRODUCTIONS[name](quick=quick, out_dir=out_dir, progress=progress)
+    for name in EXPERIMENTS:
+        results[name] = reproduce(name, quick=quick, out_dir=out_dir, progress=progress, **sweep)
+    return results
+
+
+#: ``sb3-swirl reproduce NAME``: the experiment functions by name.
+REPRODUCTIONS = {"table1": reproduce_table1, "table2": reproduce_table2} | {
+    name: partial(reproduce, name) for name in EXPERIMENTS
+}

@@ -46,6 +46,26 @@ def _jsonable(value: Any) -> Any:
     return repr(value)
 
 
+class _TaskSpaceModel:
+    """A known model of the env's observations, called on the rows of demos mapped by
+    ``transform`` (``dims``, ``angles``): the row is looked up among the demos, the model steps
+    its recorded observation, and the next observation is mapped the same way."""
+
+    def __init__(self, model: Any, raw: list[Any], mapped: list[Any], transform: Any) -> None:
+        self.model, self.transform = model, transform
+        self.raw = {
+            np.asarray(row, dtype=np.float64).tobytes(): obs
+            for r, m in zip(raw, mapped, strict=True)
+            for row, obs in zip(m.observations, r.observations, strict=True)
+        }
+
+    def __call__(self, state: np.ndarray, action: Any) -> np.ndarray:
+        key = np.asarray(state, dtype=np.float64).tobytes()
+        if key not in self.raw:
+            raise ValueError("a known model with dims/angles can only step the demos' states")
+        return self.transform(np.asarray(self.model(self.raw[key], action))[None])[0]
+
+
 def _record(estimator: Any) -> dict[str, Any]:
     params = {k: _jsonable(v) for k, v in estimator.get_params(deep=False).items()}
     return {"class": type(estimator).__name__, "params": params}
@@ -190,23 +210,30 @@ def fit_task(
             )
     if angles is not None:
         angles = check_angles(angles)
-        demos = [
-            Demonstration(
-                np.concatenate(
-                    [angle_features(d.observations, angles), d.observations[:, dims]], axis=1
-                ),
-                d.actions,
-                d.rewards,
+
+    def transform(observations: np.ndarray) -> np.ndarray:
+        if angles is not None:
+            return np.concatenate(
+                [angle_features(observations, angles), observations[:, dims]], axis=1
             )
-            for d in demos
-        ]
-    elif dims is not None:
-        demos = [Demonstration(d.observations[:, dims], d.actions, d.rewards) for d in demos]
+        return observations if dims is None else observations[:, dims]
+
+    raw_demos = demos
+    demos = [Demonstration(transform(d.observations), d.actions, d.rewards) for d in demos]
 
     report(f"learning transition regions from {len(demos)} demonstrations")
     segmenter.fit(demos)
     report(f"learning local rewards for {len(segmenter.regions_)} segments")
-    learner.fit(demos, segmenter)
+    model = getattr(learner, "dynamics", None)
+    if callable(model) and (dims is not None or angles is not None):
+        # a known model steps the env's observations: hand it the demo rows as recorded
+        learner.set_params(dynamics=_TaskSpaceModel(model, raw_demos, demos, transform))
+        try:
+            learner.fit(demos, segmenter)
+        finally:
+            learner.set_params(dynamics=model)
+    else:
+        learner.fit(demos, segmenter)
     lengths = [len(d) for d in demos]
     metadata = {
         "fitted_by": "sb3_swirl.fit_task",

@@ -268,28 +268,57 @@ def test_reproduce_refuses_unknown_names_and_bad_seeds(capsys):
 
 def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
     """A tiny Fig. 2 (parking, one seed, 3000 steps per method) through the sweep runner."""
-    from sb3_swirl.experiments import FIG2_METHODS, reproduce_fig2
+    from sb3_swirl.experiments import EXPERIMENTS, reproduce
 
-    kwargs = {"quick": True, "tasks": ["parking"], "out_dir": tmp_path, "progress": False}
-    results = reproduce_fig2(**kwargs)
-    assert {r["method"] for r in results["runs"]} == set(FIG2_METHODS)
+    kwargs = {"quick": True, "panels": ["parking"], "out_dir": tmp_path, "progress": False}
+    results = reproduce("fig2", **kwargs)
+    assert {r["method"] for r in results["runs"]} == set(EXPERIMENTS["fig2"].methods)
     assert (tmp_path / "fig2" / "figure.png").stat().st_size > 10_000
     saved = json.loads((tmp_path / "fig2" / "results.json").read_text())
     assert saved["summary"] == results["summary"]
-    swirl = saved["summary"]["parking"]["swirl"]
-    assert swirl["final_success_mean"] > 0  # SWIRL parks within 3000 steps; DQN does not
+    final = {row["method"]: row["final_success_mean"] for row in saved["summary"]}
+    assert final["swirl"] > 0  # SWIRL parks within 3000 steps; DQN does not
     with pytest.raises(ValueError, match="exists: resume the sweep"):
-        reproduce_fig2(**kwargs)
-    again = reproduce_fig2(**kwargs, resume=True)  # every run done: nothing is retrained
+        reproduce("fig2", **kwargs)
+    again = reproduce("fig2", **kwargs, resume=True)  # every run done: nothing is retrained
     assert again["summary"] == results["summary"]
     assert main(["reproduce", "table1", "--resume", "--out", str(tmp_path)]) == 2
+    assert main(["reproduce", "fig3", "--repeats", "5", "--out", str(tmp_path)]) == 2
+    assert main(["reproduce", "fig7", "--panels", "nope", "--out", str(tmp_path)]) == 2
+
+
+def test_transfer_runs_take_demos_on_one_env_and_learn_on_another():
+    """Fig. 7's jobs: demos of the standard car, learning and evaluation on both; Fig. 8's
+    swept link lengths reach gym.make; --quick shrinks demos, budgets and swept values."""
+    from sb3_swirl.experiments import EXPERIMENTS, _jobs
+
+    labels, work = _jobs(EXPERIMENTS["fig7"], ["parking"], [10, 11], quick=False)
+    assert len(work) == 2 * 2 * len(EXPERIMENTS["fig7"].methods)
+    envs = {(x, job["env_id"]) for (_, _, x, _), job in zip(labels, work, strict=True)}
+    assert envs == {
+        ("standard", "sb3_swirl/ParallelParking-v0"),
+        ("perturbed", "sb3_swirl/ParallelParkingPerturbed-v0"),
+    }
+    assert {job["demo_env_id"] for job in work} == {"sb3_swirl/ParallelParking-v0"}
+    assert {(job["n_demos"], job["max_episodes"]) for job in work} == {(100, 500)}
+    _, quick = _jobs(EXPERIMENTS["fig7"], ["parking"], [10], quick=True)
+    assert {(job["n_demos"], job["steps"]) for job in quick} == {(20, 3_000)}
+    labels, work = _jobs(EXPERIMENTS["fig8"], ["acrobot"], [10], quick=True)
+    assert {x for _, _, x, _ in labels} == {1.0, 1.5}
+    assert {job["env_kwargs"]["link_length_2"] for job in work} == {1.0, 1.5}
 
 
 @pytest.mark.slow
-def test_reproduce_fig2_quick_has_every_task_method_and_seed(tmp_path):
-    from sb3_swirl.experiments import FIG2_METHODS, FIG2_TASKS, reproduce_fig2
+@pytest.mark.parametrize(
+    "name", ["fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10"]
+)
+def test_every_figure_quick_has_every_panel_method_and_seed(name, tmp_path):
+    from sb3_swirl.experiments import EXPERIMENTS, reproduce
 
-    results = reproduce_fig2(quick=True, out_dir=tmp_path, progress=False)
-    runs = {(r["task"], r["method"], r["seed"]) for r in results["runs"]}
-    assert runs == {(t, m, 10) for t in FIG2_TASKS for m in FIG2_METHODS}
-    assert set(results["summary"]) == set(FIG2_TASKS)
+    experiment = EXPERIMENTS[name]
+    results = reproduce(name, quick=True, out_dir=tmp_path, progress=False)
+    seeds = experiment.seeds[: experiment.quick_seeds]
+    runs = {(r["panel"], r["label"], r["seed"]) for r in results["runs"]}
+    assert runs == {(p, m, s) for p in experiment.panels for m in experiment.methods for s in seeds}
+    assert json.loads((tmp_path / name / "results.json").read_text())["summary"]
+    assert (tmp_path / name / "figure.png").stat().st_size > 10_000

@@ -178,3 +178,24 @@ def test_noise_free_models_match_the_envs_without_noise():
     partial = gym.make("sb3_swirl/ParallelParkingPartial-v0").unwrapped
     with pytest.raises(ValueError, match="partial_observation hides"):
         partial.noise_free_step(np.zeros(3), 0)
+
+
+def test_a_known_model_steps_raw_observations_when_the_fit_uses_angles_and_dims():
+    """The acrobot's fit works on (cos, sin) features and two of its dims: its known model is
+    still called on the observations the env produced, and its steps reach the learner in the
+    fit's feature space."""
+    env_id = "sb3_swirl/NoisyAcrobot-v0"
+    demos = collect_demos(env_id, 4, seed=0)
+    step = gym.make(env_id).unwrapped.noise_free_step
+    seen = []
+
+    def model(observation, action):
+        seen.append(np.asarray(observation))
+        return step(observation, action)
+
+    settings = {"angles": [[0], [0, 1]], "dims": [2, 3], "reg_covar": 1e-3, "random_state": 0}
+    task = fit_task(demos, reward="maxent", dynamics=model, **settings)
+    recorded = np.concatenate([d.observations for d in demos])
+    assert seen and all(s.shape == (4,) for s in seen)
+    assert all(np.any(np.all(np.isclose(recorded, s), axis=1)) for s in seen[:50])
+    assert task.metadata["reward"]["params"]["dynamics"].endswith("model")
