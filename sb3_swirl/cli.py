@@ -199,8 +199,9 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.name} is not a sweep: --backend, --address, --resume do not apply")
     if args.name != "fig9" and args.repeats is not None:
         raise ValueError("--repeats is Fig. 9's (random demo sets)")
-    if args.panels and args.name not in EXPERIMENTS:
-        raise ValueError(f"--panels applies to the figures, not to {args.name}")
+    for flag in ("panels", "methods"):
+        if getattr(args, flag) and args.name not in EXPERIMENTS:
+            raise ValueError(f"--{flag} applies to the figures, not to {args.name}")
     common = {"quick": args.quick, "out_dir": args.out, "progress": not args.quiet}
     if args.name == "all":
         if args.seeds:
@@ -213,6 +214,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             seeds=args.seeds,
             resume=args.resume,
             panels=args.panels,
+            methods=args.methods,
             repeats=args.repeats,
         )
     else:
@@ -302,6 +304,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
     p.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
     p.add_argument("--panels", nargs="+", default=None, help="a subset of a figure's panels")
+    p.add_argument(
+        "--methods", nargs="+", default=None, help="a subset of a figure's methods (labels)"
+    )
     p.add_argument("--repeats", type=int, default=None, help="fig9: random demo sets (default 20)")
     p.set_defaults(func=_cmd_reproduce)
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+import warnings
 from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from importlib.resources import files
@@ -794,18 +795,29 @@ def method_run(
     pure = method in ("dqn", "dqn_rbf")
     n = chosen.n_demos if n_demos is None else n_demos
     demo_env = chosen.env_id if demo_env_id is None else demo_env_id
-    demos = [] if pure else collect_demos(demo_env, n, seed=seed, **chosen.demo_env_kwargs)
-    record = run_method(
-        method,
-        chosen,
-        demos,
-        seed=seed,
-        total_timesteps=steps,
-        env_kwargs=env_kwargs,
-        fit_kwargs=fit,
-        max_episodes=max_episodes,
-    )
+    # a sweep runs hundreds of fits in worker processes: keep their warnings in the record
+    # (the summary counts them) instead of interleaving them with the progress bar
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        demos = [] if pure else collect_demos(demo_env, n, seed=seed, **chosen.demo_env_kwargs)
+        record = run_method(
+            method,
+            chosen,
+            demos,
+            seed=seed,
+            total_timesteps=steps,
+            env_kwargs=env_kwargs,
+            fit_kwargs=fit,
+            max_episodes=max_episodes,
+        )
     record.pop("hyperparams", None)  # classes in policy_kwargs are not JSON
+    record["warnings"] = list(
+        dict.fromkeys(
+            f"{w.category.__name__}: {w.message}"
+            for w in caught
+            if not issubclass(w.category, DeprecationWarning)
+        )
+    )
     return record
 
 
@@ -1044,7 +1056,7 @@ EXPERIMENTS: dict[str, Experiment] = {
 
 
 def _jobs(
-    experiment: Experiment, panels: list[str], seeds: list[int], quick: bool
+    experiment: Experiment, panels: list[str], methods: list[str], seeds: list[int], quick: bool
 ) -> tuple[list[tuple[str, str, Any, int]], list[dict[str, Any]]]:
     """The labels ``(panel, method label, x, seed)`` and :func:`method_run` arguments of
     every run (only the arguments that differ from the defaults, so a job is the same
@@ -1055,7 +1067,8 @@ def _jobs(
         points = panel.values or ((None, {}),)
         if quick and panel.values:
             points = tuple(p for p in points if p[0] in panel.quick_values)
-        for label, args in experiment.methods.items():
+        for label in methods:
+            args = experiment.methods[label]
             for x, swept in points:
                 for seed in seeds:
                     job = {
@@ -1115,6 +1128,7 @@ def reproduce(
     address: str | None = None,
     resume: bool = False,
     panels: list[str] | None = None,
+    methods: list[str] | None = None,
     repeats: int | None = None,
 ) -> dict[str, Any]:
     """Reproduce a figure of the paper's §9 (:data:`EXPERIMENTS`): every panel × method ×
@@ -1138,6 +1152,9 @@ def reproduce(
         Instead of the experiment's (held-out seeds: the presets were tuned on 0-9).
     panels : list of str, optional
         A subset of the experiment's panels.
+    methods : list of str, optional
+        A subset of the experiment's method labels (the rest can follow later with
+        ``resume``: the runs already made are kept).
     repeats : int, optional
         Demo sets of Fig. 9 (seeds 100, 101, ...; the paper used 100, the full setting 20).
     backend, jobs, address : see :func:`sb3_swirl.runner.run_sweep`
@@ -1148,6 +1165,9 @@ def reproduce(
     panels = list(experiment.panels) if panels is None else panels
     for panel in panels:
         check_option("panel", panel, tuple(experiment.panels))
+    methods = list(experiment.methods) if methods is None else methods
+    for label in methods:
+        check_option("method", label, tuple(experiment.methods))
     if repeats is not None:
         seeds = list(range(100, 100 + check_int("repeats", repeats, low=2)))
     if seeds is None:
@@ -1156,7 +1176,7 @@ def reproduce(
         check_int("seed", seed, low=0)
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
-    labels, work = _jobs(experiment, panels, seeds, quick)
+    labels, work = _jobs(experiment, panels, methods, seeds, quick)
     console.rule(f"[bold]{experiment.title}: {len(work)} runs, {backend}")
     records = run_sweep(
         method_run,
@@ -1174,6 +1194,9 @@ def reproduce(
     ]
     summary = _summary(experiment, runs)
     _print_summary(experiment, summary)
+    warned = sum(bool(run.get("warnings")) for run in runs)
+    if warned:
+        console.print(f"{warned} of {len(runs)} runs warned (their fits: runs[].warnings)")
     results = {
         "figure": name,
         "title": experiment.title,
@@ -1185,7 +1208,7 @@ def reproduce(
         "runs": runs,
     }
     write_results(results, out / "results.json")
-    _plot_experiment(experiment, panels, runs, out / "figure.png")
+    _plot_experiment(experiment, panels, methods, runs, out / "figure.png")
     console.print(f"paper: {experiment.claim}\nwrote {out}/results.json, figure.png")
     return results
 
@@ -1219,7 +1242,11 @@ def _band(values: np.ndarray, spread: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _plot_experiment(
-    experiment: Experiment, panels: list[str], runs: list[dict[str, Any]], path: Path
+    experiment: Experiment,
+    panels: list[str],
+    methods: list[str],
+    runs: list[dict[str, Any]],
+    path: Path,
 ) -> None:
     """One subplot per panel, like the paper's figures: true success against rollouts (a
     line per method, shaded over the seeds; behavioural cloning, which takes none, as a
@@ -1232,8 +1259,8 @@ def _plot_experiment(
         mine = [r for r in runs if r["panel"] == name]
         xs = list(dict.fromkeys(r["x"] for r in mine))
         named = any(isinstance(x, str) for x in xs)
-        width = 0.8 / len(experiment.methods)
-        for i, label in enumerate(experiment.methods):
+        width = 0.8 / len(methods)
+        for i, label in enumerate(methods):
             these = [r for r in mine if r["label"] == label]
             text = METHOD_LABELS.get(label, label)
             style = {"color": f"C{i}", "marker": "osD^v"[i % 5], "markersize": 4}
@@ -1242,9 +1269,10 @@ def _plot_experiment(
                 mean = np.array([np.mean(f) for f in finals])
                 low, high = (np.array([b(f) for f in finals]) for b in (np.min, np.max))
                 if named:
-                    where = np.arange(len(xs)) + (i - (len(experiment.methods) - 1) / 2) * width
+                    where = np.arange(len(xs)) + (i - (len(methods) - 1) / 2) * width
                     bars = {"yerr": [mean - low, high - mean], "color": f"C{i}", "label": text}
-                    ax.bar(where, mean, width, **bars)
+                    # the value on each bar: a method at 0 is otherwise not there to see
+                    ax.bar_label(ax.bar(where, mean, width, **bars), fmt="%.2f", fontsize=7)
                 else:
                     ax.plot(xs, mean, label=text, **style)
                     ax.fill_between(xs, low, high, color=f"C{i}", alpha=0.15)

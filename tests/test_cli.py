@@ -271,20 +271,25 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
     from sb3_swirl.experiments import EXPERIMENTS, reproduce
 
     kwargs = {"quick": True, "panels": ["parking"], "out_dir": tmp_path, "progress": False}
-    results = reproduce("fig2", **kwargs)
+    first = reproduce("fig2", **kwargs, methods=["swirl"])
+    assert [r["method"] for r in first["runs"]] == ["swirl"]
+    with pytest.raises(ValueError, match="exists: resume the sweep"):
+        reproduce("fig2", **kwargs)
+    results = reproduce("fig2", **kwargs, resume=True)  # the other methods join the run made
     assert {r["method"] for r in results["runs"]} == set(EXPERIMENTS["fig2"].methods)
+    assert [r for r in results["runs"] if r["method"] == "swirl"] == first["runs"]
     assert (tmp_path / "fig2" / "figure.png").stat().st_size > 10_000
     saved = json.loads((tmp_path / "fig2" / "results.json").read_text())
     assert saved["summary"] == results["summary"]
     final = {row["method"]: row["final_success_mean"] for row in saved["summary"]}
     assert final["swirl"] > 0  # SWIRL parks within 3000 steps; DQN does not
-    with pytest.raises(ValueError, match="exists: resume the sweep"):
-        reproduce("fig2", **kwargs)
     again = reproduce("fig2", **kwargs, resume=True)  # every run done: nothing is retrained
     assert again["summary"] == results["summary"]
     assert main(["reproduce", "table1", "--resume", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig3", "--repeats", "5", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig7", "--panels", "nope", "--out", str(tmp_path)]) == 2
+    assert main(["reproduce", "fig7", "--methods", "ppo", "--out", str(tmp_path)]) == 2
+    assert main(["reproduce", "table2", "--methods", "swirl", "--out", str(tmp_path)]) == 2
 
 
 def test_transfer_runs_take_demos_on_one_env_and_learn_on_another():
@@ -292,7 +297,8 @@ def test_transfer_runs_take_demos_on_one_env_and_learn_on_another():
     swept link lengths reach gym.make; --quick shrinks demos, budgets and swept values."""
     from sb3_swirl.experiments import EXPERIMENTS, _jobs
 
-    labels, work = _jobs(EXPERIMENTS["fig7"], ["parking"], [10, 11], quick=False)
+    fig7, fig8 = EXPERIMENTS["fig7"], EXPERIMENTS["fig8"]
+    labels, work = _jobs(fig7, ["parking"], list(fig7.methods), [10, 11], quick=False)
     assert len(work) == 2 * 2 * len(EXPERIMENTS["fig7"].methods)
     envs = {(x, job["env_id"]) for (_, _, x, _), job in zip(labels, work, strict=True)}
     assert envs == {
@@ -301,9 +307,9 @@ def test_transfer_runs_take_demos_on_one_env_and_learn_on_another():
     }
     assert {job["demo_env_id"] for job in work} == {"sb3_swirl/ParallelParking-v0"}
     assert {(job["n_demos"], job["max_episodes"]) for job in work} == {(100, 500)}
-    _, quick = _jobs(EXPERIMENTS["fig7"], ["parking"], [10], quick=True)
+    _, quick = _jobs(fig7, ["parking"], ["swirl"], [10], quick=True)
     assert {(job["n_demos"], job["steps"]) for job in quick} == {(20, 3_000)}
-    labels, work = _jobs(EXPERIMENTS["fig8"], ["acrobot"], [10], quick=True)
+    labels, work = _jobs(fig8, ["acrobot"], list(fig8.methods), [10], quick=True)
     assert {x for _, _, x, _ in labels} == {1.0, 1.5}
     assert {job["env_kwargs"]["link_length_2"] for job in work} == {1.0, 1.5}
 
