@@ -13,13 +13,10 @@ reaches the target, and the ratio SWIRL / DQN.
 * **acrobot** (15 demos): the target is 95 % of the best success rate that *either* method
   reaches on that seed (the paper's "max success"); undefined when neither ever succeeds.
 
-A method that never reaches the target is *censored*: it needed more than the ``N`` episodes it
-ran. The ratio is then a bound: SWIRL reached, DQN not -> ratio < SWIRL / N_DQN (an upper
-bound); DQN reached, SWIRL not -> ratio > N_SWIRL / DQN; neither -> unknown. The median over
-seeds is exact when every ratio is; otherwise each seed's ratio is replaced by an upper bound
-(its censoring bound, or +inf for a lower bound or an unknown ratio) and, the median being
-monotone in every value, the median of those bounds bounds the true median from above ("<=").
-It is unresolved when that bound is +inf. Targets on the median: parking <= 0.15 (paper) and
+A method that never reaches the target *censors* the ratio, which becomes a bound, and the
+median over seeds an upper bound (:func:`sb3_swirl.experiments.rollout_ratio` and
+:func:`~sb3_swirl.experiments.summarise_ratios` give the rules; ``sb3-swirl reproduce fig2``
+uses the same ones). Targets on the median: parking <= 0.15 (paper) and
 <= 0.10 (this project), acrobot <= 0.3.
 
 Writes ``results/sample_efficiency/results.json``; every run's record lands in
@@ -37,14 +34,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-import statistics
 import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from sb3_swirl.experiments import rollouts_to_success, write_results
+from sb3_swirl.experiments import rollout_ratio, summarise_ratios, write_results
 from sb3_swirl.runner import BACKENDS, run_sweep
 
 RATIO_TARGETS = {"parking": (0.15, 0.10), "acrobot": (0.3,)}
@@ -93,66 +87,18 @@ def run_one(
 
 
 def compare_seed(task: str, swirl: dict, dqn: dict, target_success: float) -> dict[str, Any]:
-    """Episodes to target of both methods on one seed and their (possibly censored) ratio."""
+    """Rollouts to target of both methods on one seed and their (possibly censored) ratio
+    (:func:`sb3_swirl.experiments.rollout_ratio`; ``ours`` is SWIRL, ``theirs`` DQN)."""
     best = max(p["success_rate"] for run in (swirl, dqn) for p in run["curve"])
-    target = target_success if task == "parking" else 0.95 * best
-    out: dict[str, Any] = {"seed": swirl["seed"], "target": target, "best_success": best}
-    if task != "parking" and best <= 0.0:
-        out.update(swirl=None, dqn=None, ratio=None, kind="?")
-        return out
-    for name, run in (("swirl", swirl), ("dqn", dqn)):
-        out[name] = rollouts_to_success(run["curve"], target)
-        out[f"{name}_episodes_run"] = int(run["curve"][-1]["episodes"]) if run["curve"] else 0
-        out[f"{name}_best"] = max((p["success_rate"] for p in run["curve"]), default=0.0)
-    s, d = out["swirl"], out["dqn"]
-    if d == 0:  # DQN succeeded before finishing an episode: no ratio
-        out.update(ratio=None, kind="?")
-    elif s is not None and d is not None:
-        out.update(ratio=s / d, kind="=")
-    elif s is not None:
-        out.update(ratio=s / max(out["dqn_episodes_run"], 1), kind="<")
-    elif d is not None:
-        out.update(ratio=out["swirl_episodes_run"] / max(d, 1), kind=">")
-    else:
-        out.update(ratio=None, kind="?")
-    return out
-
-
-def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Median and spread of the per-seed ratios, with the censoring rule of the module doc."""
-    kinds = [r["kind"] for r in rows]
-    # Each seed's ratio or an upper bound of it: +inf where only a lower bound (or nothing) is
-    # known, so the median of these values can only over-state the true median.
-    uppers = [r["ratio"] if r["kind"] in ("=", "<") else math.inf for r in rows]
-    summary: dict[str, Any] = {
-        "n_seeds": len(rows),
-        "swirl_reached": sum(r.get("swirl") is not None for r in rows),
-        "dqn_reached": sum(r.get("dqn") is not None for r in rows),
-        "kinds": kinds,
-        "n_infinite": sum(math.isinf(u) for u in uppers),
-    }
-    median = statistics.median(uppers) if uppers else math.inf
-    if math.isinf(median):
-        summary.update(median=None, bound="unresolved")
-    else:
-        # "higher": quartiles of upper bounds stay upper bounds (no interpolation towards +inf)
-        q25, q75 = np.percentile(uppers, [25, 75], method="higher")
-        summary.update(
-            median=median,
-            bound="=" if all(k == "=" for k in kinds) else "<=",
-            min=min(uppers),
-            max=max(uppers),
-            q25=float(q25),
-            q75=float(q75),
-        )
-    return summary
+    target = target_success if task == "parking" else 0.95 * best if best > 0 else math.inf
+    return {"seed": swirl["seed"], "best_success": best} | rollout_ratio(swirl, dqn, target)
 
 
 def _fmt_episodes(row: dict[str, Any], name: str) -> str:
     if row.get(name) is not None:
         return str(row[name])
-    if f"{name}_episodes_run" in row:
-        return f">{row[f'{name}_episodes_run']} (not reached)"
+    if f"{name}_rollouts_run" in row:
+        return f">{row[f'{name}_rollouts_run']} (not reached)"
     return "n/a"
 
 
@@ -168,13 +114,13 @@ def print_task(task: str, rows: list[dict[str, Any]], summary: dict[str, Any]) -
     print(f"{'seed':>5}  {'target':>6}  {'SWIRL':>24}  {'DQN':>24}  ratio SWIRL/DQN")
     for r in rows:
         print(
-            f"{r['seed']:>5}  {r['target']:>6.3f}  {_fmt_episodes(r, 'swirl'):>24}  "
-            f"{_fmt_episodes(r, 'dqn'):>24}  {_fmt_ratio(r)}"
+            f"{r['seed']:>5}  {r['target']:>6.3f}  {_fmt_episodes(r, 'ours'):>24}  "
+            f"{_fmt_episodes(r, 'theirs'):>24}  {_fmt_ratio(r)}"
         )
     n = summary["n_seeds"]
     print(
-        f"SWIRL reached the target on {summary['swirl_reached']}/{n} seeds, DQN on "
-        f"{summary['dqn_reached']}/{n}"
+        f"SWIRL reached the target on {summary['ours_reached']}/{n} seeds, DQN on "
+        f"{summary['theirs_reached']}/{n}"
     )
     if summary["median"] is None:
         print("median ratio: unresolved (half the seeds or more have only a lower bound)")
@@ -262,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
             compare_seed(task, by_seed["swirl_dqn", s], by_seed["dqn", s], preset.target_success)
             for s in seeds
         ]
-        summary = summarise(rows)
+        summary = summarise_ratios(rows)
         print_task(task, rows, summary)
         results["tasks"][task] = {
             "preset": dataclasses.asdict(preset),

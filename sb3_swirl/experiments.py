@@ -8,6 +8,8 @@ rl-zoo share one tuned set.
 from __future__ import annotations
 
 import json
+import math
+import statistics
 import sys
 import time
 import warnings
@@ -132,6 +134,62 @@ def rollouts_to_success(curve: list[dict[str, float]], target: float) -> int | N
         if point["success_rate"] >= target:
             return int(point["episodes"])
     return None
+
+
+def rollout_ratio(ours: dict[str, Any], theirs: dict[str, Any], target: float) -> dict[str, Any]:
+    """Rollouts to ``target`` success of two runs on one seed (records with a ``curve``) and
+    their ratio ours / theirs, which a run that never reaches the target *censors*: it needed
+    more than the ``N`` rollouts it ran.
+
+    ``kind`` says what the ratio is: ``"="`` measured; ``"<"`` an upper bound (only ours
+    reached: ours / N_theirs); ``">"`` a lower bound (only theirs reached); ``"?"`` unknown
+    (neither reached, or theirs reached before finishing a rollout).
+    """
+    out: dict[str, Any] = {"target": target}
+    for name, run in (("ours", ours), ("theirs", theirs)):
+        out[name] = rollouts_to_success(run["curve"], target)
+        out[f"{name}_rollouts_run"] = int(run["curve"][-1]["episodes"]) if run["curve"] else 0
+    s, t = out["ours"], out["theirs"]
+    if t == 0 or (s is None and t is None):
+        out.update(ratio=None, kind="?")
+    elif s is not None and t is not None:
+        out.update(ratio=s / t, kind="=")
+    elif s is not None:
+        out.update(ratio=s / max(out["theirs_rollouts_run"], 1), kind="<")
+    else:
+        out.update(ratio=out["ours_rollouts_run"] / t, kind=">")
+    return out
+
+
+def summarise_ratios(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The median of per-seed :func:`rollout_ratio` s, exact when every ratio is measured.
+    Otherwise each seed counts at an upper bound of its ratio (its censoring bound, or +inf
+    where only a lower bound or nothing is known): the median being monotone in every value,
+    the median of these bounds bounds the true median from above (``bound`` ``"<="``). It is
+    ``"unresolved"`` when that bound is +inf."""
+    kinds = [r["kind"] for r in rows]
+    uppers = [r["ratio"] if r["kind"] in ("=", "<") else math.inf for r in rows]
+    summary: dict[str, Any] = {
+        "n_seeds": len(rows),
+        "ours_reached": sum(r.get("ours") is not None for r in rows),
+        "theirs_reached": sum(r.get("theirs") is not None for r in rows),
+        "kinds": kinds,
+        "n_infinite": sum(math.isinf(u) for u in uppers),
+    }
+    median = statistics.median(uppers) if uppers else math.inf
+    if math.isinf(median):
+        summary.update(median=None, bound="unresolved")
+        return summary
+    # "higher": quartiles of upper bounds stay upper bounds (no interpolation towards +inf)
+    q25, q75 = np.percentile(uppers, [25, 75], method="higher")
+    return summary | {
+        "median": median,
+        "bound": "=" if all(k == "=" for k in kinds) else "<=",
+        "min": min(uppers),
+        "max": max(uppers),
+        "q25": float(q25),
+        "q75": float(q75),
+    }
 
 
 def train_and_evaluate(
@@ -861,6 +919,8 @@ class Experiment:
     spread: str = "range"
     #: how many of ``seeds`` ``--quick`` runs
     quick_seeds: int = 1
+    #: method pairs (ours, theirs) whose rollouts to the target are compared per seed
+    ratios: tuple[tuple[str, str], ...] = ()
 
 
 #: ``--quick``'s budget and evaluation schedule
@@ -920,6 +980,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             ),
         },
         _methods("swirl", "dqn", "dqn_rbf"),
+        ratios=(("swirl", "dqn"), ("swirl", "dqn_rbf")),
     ),
     "fig3": Experiment(
         "fig3",
@@ -1194,6 +1255,9 @@ def reproduce(
     ]
     summary = _summary(experiment, runs)
     _print_summary(experiment, summary)
+    ratios = _ratios(experiment, runs)
+    for row in ratios:
+        console.print(_ratio_line(row), soft_wrap=True)
     warned = sum(bool(run.get("warnings")) for run in runs)
     if warned:
         console.print(f"{warned} of {len(runs)} runs warned (their fits: runs[].warnings)")
@@ -1205,12 +1269,49 @@ def reproduce(
         "seeds": seeds,
         "backend": backend,
         "summary": summary,
+        "ratios": ratios,
         "runs": runs,
     }
     write_results(results, out / "results.json")
     _plot_experiment(experiment, panels, methods, runs, out / "figure.png")
-    console.print(f"paper: {experiment.claim}\nwrote {out}/results.json, figure.png")
+    console.print(f"paper: {experiment.claim}", soft_wrap=True)
+    console.print(f"wrote {out}/results.json, figure.png", soft_wrap=True)
     return results
+
+
+def _ratios(experiment: Experiment, runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per panel (and swept value) and pair of :attr:`Experiment.ratios`: every seed's
+    :func:`rollout_ratio` to the task's target and their :func:`summarise_ratios`."""
+    groups: dict[tuple[str, Any], dict[tuple[str, int], dict[str, Any]]] = {}
+    for run in runs:
+        groups.setdefault((run["panel"], run["x"]), {})[run["label"], run["seed"]] = run
+    out = []
+    for (panel, x), mine in groups.items():
+        target = PRESETS[experiment.panels[panel].preset].target_success
+        for ours, theirs in experiment.ratios:
+            seeds = sorted(s for label, s in mine if label == ours and (theirs, s) in mine)
+            if not seeds:
+                continue
+            rows = [
+                {"seed": s} | rollout_ratio(mine[ours, s], mine[theirs, s], target) for s in seeds
+            ]
+            pair = {"panel": panel, "x": x, "ours": ours, "theirs": theirs, "seeds": rows}
+            out.append(pair | summarise_ratios(rows))
+    return out
+
+
+def _ratio_line(row: dict[str, Any]) -> str:
+    names = " / ".join(METHOD_LABELS.get(row[k], row[k]) for k in ("ours", "theirs"))
+    where = row["panel"] + ("" if row["x"] is None else f" at {row['x']}")
+    n = row["n_seeds"]
+    head = f"{where}: rollouts to {row['seeds'][0]['target']:.0%}, {names}:"
+    if row["median"] is None:
+        return f"{head} unresolved (half the {n} seeds or more have no upper bound)"
+    bound = "=" if row["bound"] == "=" else "<="
+    return (
+        f"{head} median {bound} {row['median']:.3f} over {n} seeds (IQR {row['q25']:.3f}-"
+        f"{row['q75']:.3f}; reached: {row['ours_reached']} / {row['theirs_reached']} seeds)"
+    )
 
 
 def _print_summary(experiment: Experiment, summary: list[dict[str, Any]]) -> None:

@@ -272,7 +272,7 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
 
     kwargs = {"quick": True, "panels": ["parking"], "out_dir": tmp_path, "progress": False}
     first = reproduce("fig2", **kwargs, methods=["swirl"])
-    assert [r["method"] for r in first["runs"]] == ["swirl"]
+    assert [r["method"] for r in first["runs"]] == ["swirl"] and first["ratios"] == []
     with pytest.raises(ValueError, match="exists: resume the sweep"):
         reproduce("fig2", **kwargs)
     results = reproduce("fig2", **kwargs, resume=True)  # the other methods join the run made
@@ -282,6 +282,9 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
     saved = json.loads((tmp_path / "fig2" / "results.json").read_text())
     assert saved["summary"] == results["summary"]
     final = {row["method"]: row["final_success_mean"] for row in saved["summary"]}
+    pairs = {(row["ours"], row["theirs"]): row for row in saved["ratios"]}
+    assert set(pairs) == {("swirl", "dqn"), ("swirl", "dqn_rbf")}
+    assert [seed["seed"] for seed in pairs["swirl", "dqn"]["seeds"]] == [10]
     assert final["swirl"] > 0  # SWIRL parks within 3000 steps; DQN does not
     again = reproduce("fig2", **kwargs, resume=True)  # every run done: nothing is retrained
     assert again["summary"] == results["summary"]
