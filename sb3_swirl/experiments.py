@@ -162,7 +162,7 @@ def rollout_ratio(ours: dict[str, Any], theirs: dict[str, Any], target: float) -
 
 
 def summarise_ratios(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """The median of per-seed :func:`rollout_ratio` s, exact when every ratio is measured.
+    """The median of per-seed ratios (:func:`rollout_ratio`), exact when every one is measured.
     Otherwise each seed counts at an upper bound of its ratio (its censoring bound, or +inf
     where only a lower bound or nothing is known): the median being monotone in every value,
     the median of these bounds bounds the true median from above (``bound`` ``"<="``). It is

@@ -285,6 +285,7 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
     pairs = {(row["ours"], row["theirs"]): row for row in saved["ratios"]}
     assert set(pairs) == {("swirl", "dqn"), ("swirl", "dqn_rbf")}
     assert [seed["seed"] for seed in pairs["swirl", "dqn"]["seeds"]] == [10]
+    assert all(isinstance(run["warnings"], list) for run in saved["runs"])  # kept, not printed
     assert final["swirl"] > 0  # SWIRL parks within 3000 steps; DQN does not
     again = reproduce("fig2", **kwargs, resume=True)  # every run done: nothing is retrained
     assert again["summary"] == results["summary"]
