@@ -90,7 +90,10 @@ def compare_seed(task: str, swirl: dict, dqn: dict, target_success: float) -> di
     """Rollouts to target of both methods on one seed and their (possibly censored) ratio
     (:func:`sb3_swirl.experiments.rollout_ratio`; ``ours`` is SWIRL, ``theirs`` DQN)."""
     best = max(p["success_rate"] for run in (swirl, dqn) for p in run["curve"])
-    target = target_success if task == "parking" else 0.95 * best if best > 0 else math.inf
+    if task == "parking":
+        target = target_success
+    else:  # the paper's "max success"; none when neither method ever succeeds
+        target = 0.95 * best if best > 0 else math.inf
     return {"seed": swirl["seed"], "best_success": best} | rollout_ratio(swirl, dqn, target)
 
 
