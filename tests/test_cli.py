@@ -221,6 +221,8 @@ def test_ctrl_c_in_the_middle_of_a_real_run(tmp_path):
         [sys.executable, "-m", "sb3_swirl.cli", *command],
         stderr=subprocess.PIPE,
         text=True,
+        # a shell's background job inherits SIGINT ignored, and Python then keeps it ignored
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     started = proc.stderr.readline()  # printed when the work starts, after the imports
     assert started.startswith("collecting 500 demos"), started
