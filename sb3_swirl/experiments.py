@@ -1367,6 +1367,7 @@ def _plot_experiment(
         mine = [r for r in runs if r["panel"] == name]
         xs = list(dict.fromkeys(r["x"] for r in mine))
         named = any(isinstance(x, str) for x in xs)
+        ends: list[float] = []  # the rollouts each learning curve ran
         width = 0.8 / len(methods)
         for i, label in enumerate(methods):
             these = [r for r in mine if r["label"] == label]
@@ -1395,6 +1396,9 @@ def _plot_experiment(
             ax.plot(episodes, success.mean(axis=0), label=text, **style)
             band = _band(success, experiment.spread)
             ax.fill_between(episodes, *band, color=f"C{i}", alpha=0.15)
+            ends.append(episodes[-1])
+        if ends and max(ends) > 5 * max(min(ends), 1):  # budgets far apart (Fig. 2: 1M steps)
+            ax.set_xscale("symlog", linthresh=10)
         if named:
             ax.set_xticks(np.arange(len(xs)), xs)
         elif xs != [None]:
