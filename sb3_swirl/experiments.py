@@ -1314,9 +1314,8 @@ def _ratio_line(row: dict[str, Any]) -> str:
     head = f"{where}: rollouts to {row['seeds'][0]['target']:.0%}, {names}:"
     if row["median"] is None:
         return f"{head} unresolved (half the {n} seeds or more have no upper bound)"
-    bound = "=" if row["bound"] == "=" else "<="
     return (
-        f"{head} median {bound} {row['median']:.3f} over {n} seeds (IQR {row['q25']:.3f}-"
+        f"{head} median {row['bound']} {row['median']:.3f} over {n} seeds (IQR {row['q25']:.3f}-"
         f"{row['q75']:.3f}; reached: {row['ours_reached']} / {row['theirs_reached']} seeds)"
     )
 
@@ -1372,30 +1371,32 @@ def _plot_experiment(
         for i, label in enumerate(methods):
             these = [r for r in mine if r["label"] == label]
             text = METHOD_LABELS.get(label, label)
-            style = {"color": f"C{i}", "marker": "osD^v"[i % 5], "markersize": 4}
+            k = list(experiment.methods).index(label)  # a method's colour, also in a subset
+            color = f"C{k}"
+            style = {"color": color, "marker": "osD^v"[k % 5], "markersize": 4}
             if xs != [None]:  # success after the budget against the swept value
                 finals = [[r["final_success"] for r in these if r["x"] == x] for x in xs]
                 mean = np.array([np.mean(f) for f in finals])
                 low, high = (np.array([b(f) for f in finals]) for b in (np.min, np.max))
                 if named:
                     where = np.arange(len(xs)) + (i - (len(methods) - 1) / 2) * width
-                    bars = {"yerr": [mean - low, high - mean], "color": f"C{i}", "label": text}
+                    bars = {"yerr": [mean - low, high - mean], "color": color, "label": text}
                     # the value on each bar: a method at 0 is otherwise not there to see
                     ax.bar_label(ax.bar(where, mean, width, **bars), fmt="%.2f", fontsize=7)
                 else:
                     ax.plot(xs, mean, label=text, **style)
-                    ax.fill_between(xs, low, high, color=f"C{i}", alpha=0.15)
+                    ax.fill_between(xs, low, high, color=color, alpha=0.15)
                 continue
             curves = [r["curve"] for r in these]
             n = min(len(c) for c in curves)
             success = np.array([[p["success_rate"] for p in c[:n]] for c in curves])
             episodes = np.array([[p["episodes"] for p in c[:n]] for c in curves]).mean(axis=0)
             if n == 1:  # behavioural cloning: no rollouts
-                ax.axhline(success.mean(), linestyle="--", color=f"C{i}", label=text)
+                ax.axhline(success.mean(), linestyle="--", color=color, label=text)
                 continue
             ax.plot(episodes, success.mean(axis=0), label=text, **style)
             band = _band(success, experiment.spread)
-            ax.fill_between(episodes, *band, color=f"C{i}", alpha=0.15)
+            ax.fill_between(episodes, *band, color=color, alpha=0.15)
             ends.append(episodes[-1])
         if ends and max(ends) > 5 * max(min(ends), 1):  # budgets far apart (Fig. 2: 1M steps)
             ax.set_xscale("symlog", linthresh=10)
