@@ -71,7 +71,8 @@ class SwirlDQN(DQN):
         Double DQN's TD target (van Hasselt et al., 2016): the online network picks the next
         action, the target network scores it, which curbs the over-estimation of the max.
     prefill_replay : bool
-        Add the demo transitions (proxy reward, done at each demo's end) to the replay buffer.
+        Add the demo transitions (proxy reward, done at each demo's end) to the replay buffer,
+        in order, so that SB3's n-step returns (``n_steps > 1``) read them as DQfD does.
     infer_actions : {"inverse_dynamics", "none"}
         For demos without actions: label them with an :class:`InverseDynamics` model trained on
         ``inverse_dynamics_steps`` random-action steps in the env (which also go into the
@@ -149,12 +150,11 @@ class SwirlDQN(DQN):
         )
         InverseDynamics.from_kwargs(inverse_dynamics_kwargs)  # bad settings fail now
         self.inverse_dynamics_kwargs = dict(inverse_dynamics_kwargs or {})
-        n_step = max(int(n_steps), int(dict(replay_buffer_kwargs or {}).get("n_steps", 1)))
-        if prefill_replay and (n_step > 1 or optimize_memory_usage):
+        if prefill_replay and optimize_memory_usage:
             raise ValueError(
-                "prefill_replay needs a plain 1-step replay buffer: the demo transitions do not "
-                "follow the buffer's env columns, which n-step returns and "
-                "optimize_memory_usage read across rows (set prefill_replay=False)"
+                "prefill_replay needs a replay buffer without optimize_memory_usage: the "
+                "demo transitions do not follow one another as that buffer's rows must "
+                "(set prefill_replay=False)"
             )
         super().__init__(
             policy,
@@ -543,18 +543,25 @@ class SwirlDQN(DQN):
         return {"loss": loss_value, "accuracy": accuracy, "n_pairs": n}
 
     def _prefill(self, data: dict[str, np.ndarray]) -> None:
-        """Add the demo transitions to the replay buffer, ``n_envs`` rows at a time."""
+        """Add the demo transitions to the replay buffer, ``n_envs`` rows at a time.
+
+        Each env column gets a contiguous run of the transitions (the last column wraps around
+        to the first ones), so an n-step buffer reads a demo in order; where a column's run
+        cuts a demo short, the cut is marked as a time-limit truncation, so no return is read
+        across it into the next column's or the online transitions.
+        """
         n, n_envs = len(data["actions"]), self.n_envs
-        # the last group is completed by wrapping around to the first transitions
-        order = np.arange(-(-n // n_envs) * n_envs) % n
-        for rows in order.reshape(-1, n_envs):
+        length = -(-n // n_envs)
+        order = (np.arange(length * n_envs) % n).reshape(n_envs, length).T
+        for t, rows in enumerate(order):
+            cut = t == length - 1
             self.replay_buffer.add(  # type: ignore[union-attr]
                 data["obs"][rows],
                 data["next_obs"][rows],
                 data["actions"][rows][:, None],
                 data["reward"][rows],
                 data["done"][rows],
-                [{} for _ in rows],
+                [{"TimeLimit.truncated": cut and not done} for done in data["done"][rows]],
             )
 
     def _record(self, key: str, value: float) -> None:

@@ -171,9 +171,11 @@ def test_a_batch_larger_than_the_demo_pairs_is_all_of_them():
         (dict(bc_epochs=2.7), "bc_epochs must be an integer"),
         (dict(bc_batch_size="64"), "bc_batch_size must be an integer"),
         (dict(task="task.json"), "task must be a swirl_wrappers.TaskModel, got str"),
-        (dict(prefill_replay=True, n_steps=3), "prefill_replay"),
         (dict(double_q=1), "double_q"),
-        (dict(prefill_replay=True, optimize_memory_usage=True, replay_buffer_kwargs={}), "1-step"),
+        (
+            dict(prefill_replay=True, optimize_memory_usage=True, replay_buffer_kwargs={}),
+            "optimize_memory_usage",
+        ),
     ],
 )
 def test_bad_settings_fail_at_construction(kwargs, match):
@@ -262,6 +264,52 @@ def test_prefill_matches_what_the_wrapper_shows(wrapper_kwargs):
             if terminated or truncated:
                 break
     assert buffer.size() == row
+
+
+def test_prefill_lays_demos_out_in_order_for_n_step_returns():
+    """With 3 envs and 3-step returns, each buffer column reads the demos in order, and a
+    column's last row is a demo's end or marked as a truncation: the n-step return of every
+    demo transition equals its return computed from the demo alone."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    demos = point_demos(4)
+    model = SwirlDQN(
+        "MlpPolicy",
+        DummyVecEnv([point_env] * 3),
+        demonstrations=demos,
+        n_steps=3,
+        gamma=0.9,
+        prefill_replay=True,
+        bc_epochs=1,
+        seed=0,
+    )
+    model.pretrain()
+    data, buffer = model._demo_data, model.replay_buffer
+    n, rows = len(data["reward"]), buffer.pos
+    assert rows == -(-n // 3)
+    assert data["done"].sum() == len(demos)
+
+    def n_step(k: int, stop: int) -> tuple[float, float]:
+        """Return and bootstrap discount of demo transition k read up to transition stop."""
+        total, steps = 0.0, 0
+        for j in range(k, k + 3):
+            if j == stop:
+                break
+            total += 0.9**steps * data["reward"][j]
+            steps += 1
+            if data["done"][j]:
+                break
+        return total, 0.9**steps
+
+    for _ in range(20):  # the buffer draws each sample's env column at random
+        samples = buffer._get_samples(np.arange(rows))
+        for row in range(rows):
+            obs = samples.observations[row].numpy()
+            k = int(np.flatnonzero(np.all(np.isclose(data["obs"], obs), axis=1))[0])
+            # slot j = column * rows + row holds transition j % n; the column ends at a cut
+            placements = [n_step(k, k + rows - j % rows) for j in (k, k + n) if j < 3 * rows]
+            got = (samples.rewards[row, 0].item(), samples.discounts[row, 0].item())
+            assert any(got == pytest.approx(p, abs=1e-5) for p in placements)
 
 
 def test_potential_shaping_with_another_gamma_warns():
