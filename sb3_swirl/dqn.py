@@ -554,14 +554,15 @@ class SwirlDQN(DQN):
         length = -(-n // n_envs)
         order = (np.arange(length * n_envs) % n).reshape(n_envs, length).T
         for t, rows in enumerate(order):
-            cut = t == length - 1
+            done = data["done"][rows]
+            truncated = ~done & (t == length - 1)
             self.replay_buffer.add(  # type: ignore[union-attr]
                 data["obs"][rows],
                 data["next_obs"][rows],
                 data["actions"][rows][:, None],
                 data["reward"][rows],
-                data["done"][rows],
-                [{"TimeLimit.truncated": cut and not done} for done in data["done"][rows]],
+                done,
+                [{"TimeLimit.truncated": bool(cut)} for cut in truncated],
             )
 
     def _record(self, key: str, value: float) -> None:
