@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo demo-acrobot demo-linecutting demo-tensioning table1 test test-slow bench lint format clean
+.PHONY: install demo demo-acrobot demo-linecutting demo-tensioning demo-fetchpush table1 test test-slow bench lint format clean
 
 install: $(STAMP)
 
@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml wrappers/pyproject.toml Makefile
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# torch first, pinned: an unpinned torch pulls a multi-GB CUDA build
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e ./wrappers -e ".[zoo,render,robosuite,ray,dev]"
+	$(BIN)/python -m pip install --quiet -e ./wrappers -e ".[zoo,render,robosuite,fetch,ray,dev]"
 	# imitation pins old SB3/gymnasium; its data types work with ours (see NOTES-stack.md)
 	$(BIN)/python -m pip install --quiet --no-deps imitation==1.0.1 seals==0.2.1
 	touch $(STAMP)
@@ -29,6 +29,9 @@ demo-linecutting: install
 
 demo-tensioning: install
 	$(BIN)/sb3-swirl demo tensioning
+
+demo-fetchpush: install
+	$(BIN)/sb3-swirl demo fetchpush
 
 table1: install
 	$(BIN)/sb3-swirl reproduce table1

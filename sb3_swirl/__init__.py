@@ -26,6 +26,7 @@ from sb3_swirl.dqn import SwirlDQN
 from sb3_swirl.envs import (
     DVRKLineCuttingEnv,
     DVRKTensioningEnv,
+    FetchDiscreteEnv,
     NoisyAcrobotEnv,
     ParallelParkingEnv,
 )
@@ -57,6 +58,7 @@ __all__ = [
     "DVRKTensioningEnv",
     "DemoWarning",
     "Demonstration",
+    "FetchDiscreteEnv",
     "InverseDynamics",
     "MaxEntIRLRewardLearner",
     "NoisyAcrobotEnv",

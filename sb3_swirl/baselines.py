@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 
 from sb3_swirl.demos import Demonstration
-from swirl_wrappers import Lifter, TaskModel
+from swirl_wrappers import Lifter, TaskModel, observation_state
 from swirl_wrappers._validation import check_option
 
 
@@ -42,6 +42,9 @@ class BCPolicy:
     max_iter : int, default 2000
     random_state : int, optional
         Seeds the network's initialisation and batches.
+    state_key : str or sequence of str, optional
+        For ``Dict`` observations: the key, or the keys joined in order, whose values the
+        policy reads (what the demos record; :func:`sb3_swirl.collect_demos`).
 
     Examples
     --------
@@ -58,8 +61,10 @@ class BCPolicy:
         hidden_layer_sizes: tuple[int, ...] = (64, 64),
         max_iter: int = 2000,
         random_state: int | None = None,
+        state_key: str | Sequence[str] | None = None,
     ) -> None:
         self.classifier = check_option("classifier", classifier, ("mlp", "svm", "linear_svm"))
+        self.state_key = state_key
         self.hidden_layer_sizes = hidden_layer_sizes
         self.max_iter = max_iter
         self.random_state = random_state
@@ -94,7 +99,10 @@ class BCPolicy:
 
     def predict(self, observation: np.ndarray, deterministic: bool = True) -> tuple[Any, None]:
         """The cloned action for one observation (d,) or a batch (n, d), as SB3's ``predict``
-        returns it (the second item, SB3's recurrent state, is always None)."""
+        returns it (the second item, SB3's recurrent state, is always None). ``Dict``
+        observations are read with ``state_key``."""
+        if isinstance(observation, dict):
+            observation = observation_state(observation, self.state_key or "observation")
         x = np.asarray(observation, dtype=np.float64)
         action = self.model_.predict(x.reshape(-1, x.shape[-1]))
         return (action if x.ndim == 2 else action[0]), None
@@ -127,6 +135,7 @@ METHODS: dict[str, str] = {
     "swirl_maxent_model": "the same with the env's known model (noise_free_step)",
     "dqn": "pure exploration: DQN on the true reward",
     "dqn_rbf": "DQN with the paper's RBF Q-function (RBFFeaturesExtractor)",
+    "dqn_her": "DQN with hindsight experience replay (SB3's HerReplayBuffer; goal envs)",
     "bc_linear_svm": "pure demonstration: linear SVM (hinge loss, L2 alpha 5e-3)",
     "bc_rbf_svm": "pure demonstration: RBF-kernel SVM",
     "bc_mlp": "pure demonstration: a (64, 64) perceptron (scikit-learn)",
@@ -263,12 +272,15 @@ def run_method(
         return env.noise_free_step
 
     if method in ("swirl", "swirl_maxent", "swirl_maxent_model"):
-        reward = {"swirl": {}, "swirl_maxent": {"reward": "maxent"}}.get(
-            method, {"reward": "maxent", "dynamics": known_model()}
-        )
+        reward = {"swirl": {}, "swirl_maxent": {"reward": "maxent"}}.get(method)
+        if reward is None:
+            reward = {"reward": "maxent", "dynamics": known_model()}
         task = fit_task(demos, **fit, **reward)
         result = train_and_evaluate("swirl_dqn", preset, task=task, demos=demos, **budget)
         return result | {"method": method, "n_segments": task.n_segments}
+    if method == "dqn_her":
+        result = train_and_evaluate("dqn", preset, hyperparams=_her_hyperparams(preset), **budget)
+        return result | {"method": method}
     if method in ("dqn", "dqn_rbf"):
         hyperparams = load_hyperparams("dqn", preset.env_id)
         if method == "dqn_rbf":
@@ -308,13 +320,14 @@ def run_method(
 
     start = time.perf_counter()
     if method.startswith("bc_"):
-        policy = _fit_bc(method, demos, gym.make(preset.env_id, **env_kwargs), seed)
+        env = gym.make(preset.env_id, **{**_entry_env_kwargs(preset), **env_kwargs})
+        policy = _fit_bc(method, demos, env, seed, preset.state_key)
         steps = episodes = 0
     else:
         policy, steps, episodes = _train_gail(
             demos, preset.env_id, total_timesteps, seed, env_kwargs
         )
-    eval_env = gym.make(preset.env_id, **env_kwargs)
+    eval_env = gym.make(preset.env_id, **{**_entry_env_kwargs(preset), **env_kwargs})
     success, task_return = evaluate_true_success(
         policy, eval_env, preset.n_eval_episodes, seed + 10_000
     )
@@ -349,8 +362,46 @@ def _require_imitation(method: str) -> None:
         ) from None
 
 
-def _fit_bc(method: str, demos: Sequence[Demonstration], env: Any, seed: int) -> Any:
-    """A behavioural clone of the demos on the raw observations (``env`` gives the spaces)."""
+def _entry_env_kwargs(preset: Any) -> dict[str, Any]:
+    """The ``env_kwargs`` of the task's ``swirl_dqn`` entry: the env the demos fit."""
+    from sb3_swirl.experiments import load_hyperparams
+
+    return dict(load_hyperparams("swirl_dqn", preset.env_id).get("env_kwargs") or {})
+
+
+def _her_hyperparams(preset: Any) -> dict[str, Any]:
+    """Plain DQN's entry with SB3's ``HerReplayBuffer`` (4 future goals per transition, as
+    in the HER paper). HER relabels ``desired_goal`` alone, so the env gets no observation
+    key computed from the goal (the Fetch tasks' ``goal_offset``)."""
+    from stable_baselines3 import HerReplayBuffer
+
+    from sb3_swirl.experiments import _normalize_kwargs, load_hyperparams
+
+    hyperparams = load_hyperparams("dqn", preset.env_id)
+    if not hyperparams.get("policy", "").startswith("MultiInput"):
+        raise ValueError(f"dqn_her needs a goal env with Dict observations; {preset.env_id} is not")
+    env_kwargs = dict(hyperparams.get("env_kwargs") or {})
+    env_kwargs.pop("goal_offset", None)
+    normalize = _normalize_kwargs(hyperparams.get("normalize", False))
+    if normalize is not None and "norm_obs_keys" in normalize:
+        keys = [key for key in normalize["norm_obs_keys"] if key != "goal_offset"]
+        hyperparams["normalize"] = normalize | {"norm_obs_keys": keys}
+    return hyperparams | {
+        "env_kwargs": env_kwargs,
+        "replay_buffer_class": HerReplayBuffer,
+        "replay_buffer_kwargs": {"n_sampled_goal": 4, "goal_selection_strategy": "future"},
+    }
+
+
+def _fit_bc(
+    method: str,
+    demos: Sequence[Demonstration],
+    env: Any,
+    seed: int,
+    state_key: str | Sequence[str] | None = None,
+) -> Any:
+    """A behavioural clone of the demos on the raw observations (``env`` gives the spaces;
+    ``state_key`` what the demos record of a ``Dict`` observation)."""
     if method == "bc_imitation":
         _require_imitation(method)
         from imitation.algorithms import bc
@@ -371,7 +422,7 @@ def _fit_bc(method: str, demos: Sequence[Demonstration], env: Any, seed: int) ->
     observations = np.concatenate([d.observations[:-1] for d in demos])
     actions = np.concatenate([np.asarray(d.actions) for d in demos])
     classifier = {"bc_linear_svm": "linear_svm", "bc_rbf_svm": "svm", "bc_mlp": "mlp"}[method]
-    return BCPolicy(classifier, random_state=seed).fit(observations, actions)
+    return BCPolicy(classifier, random_state=seed, state_key=state_key).fit(observations, actions)
 
 
 def _train_gail(

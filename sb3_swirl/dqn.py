@@ -14,12 +14,14 @@ from stable_baselines3.common.type_aliases import GymEnv, Schedule
 from stable_baselines3.dqn.policies import DQNPolicy
 from torch.nn import functional as F
 
+from sb3_swirl.buffers import DictNStepReplayBuffer
 from sb3_swirl.demos import Demonstration, as_demonstrations, check_demos_fit_spaces
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.inverse_dynamics import InverseDynamics
 from sb3_swirl.vec_env import get_swirl_attr
 from swirl_wrappers import Lifter, SegmentTracker, TaskModel
 from swirl_wrappers._validation import check_bool, check_int, check_option, check_real
+from swirl_wrappers.wrappers import SEGMENT_KEY
 
 __all__ = ["SwirlDQN"]
 
@@ -230,19 +232,59 @@ class SwirlDQN(DQN):
         """Refuse demos that do not fit the env's spaces now, not inside ``learn``."""
         if not self.demonstrations:
             return
-        space, task = self.observation_space, self.task
-        assert task is not None
-        if not isinstance(space, spaces.Box) or len(space.shape) != 1:
-            raise ValueError(f"SwirlDQN's demonstrations need a flat Box observation, got {space}")
         check_demos_fit_spaces(
             self.demonstrations,
-            space.shape[0] - task.n_indices,
+            self._demo_space().shape[0],
             int(self.action_space.n),  # type: ignore[attr-defined]
             "demonstration",
             "the environment's (unlifted) observations",
             " (demos must be states of the env under the SWIRL wrapper; frame stacking is not "
             "supported)",
         )
+
+    def _demo_space(self) -> spaces.Box:
+        """The space of a demo state: the unlifted observation (Box), or on Dict observations
+        the values of every key joined in the wrapper's ``state_key`` order, which must name
+        them all (a demo is cloned into the Q-network, which sees the whole observation)."""
+        space, task = self.observation_space, self.task
+        assert task is not None
+        if isinstance(space, spaces.Box) and len(space.shape) == 1:
+            state_dim = space.shape[0] - task.n_indices
+            return spaces.Box(space.low[:state_dim], space.high[:state_dim], dtype=space.dtype)
+        if not isinstance(space, spaces.Dict):
+            raise ValueError(f"SwirlDQN needs a flat Box or a Dict observation, got {space}")
+        keys = self._state_keys()
+        missing = [key for key in space.spaces if key != SEGMENT_KEY and key not in keys]
+        if missing:
+            raise ValueError(
+                f"SwirlDQN clones the demos into the Q-network, which sees the whole Dict "
+                f"observation, but the task state (state_key={list(keys)}) leaves out "
+                f"{missing}: wrap with state_key listing every key and let the task read a "
+                "part of it with fit_task(dims=...)"
+            )
+        parts = [space[key] for key in keys]
+        return spaces.Box(
+            np.concatenate([part.low for part in parts]),
+            np.concatenate([part.high for part in parts]),
+            dtype=np.float64,
+        )
+
+    def _state_keys(self) -> tuple[str, ...]:
+        assert self.env is not None
+        key = get_swirl_attr(self.env, "state_key")
+        return (key,) if isinstance(key, str) else tuple(key)
+
+    def _as_observations(self, states: np.ndarray) -> Any:
+        """Demo states as (unlifted) observations: Dict observations split by key."""
+        space = self.observation_space
+        if not isinstance(space, spaces.Dict):
+            return states
+        out, start = {}, 0
+        for key in self._state_keys():
+            size = space[key].shape[0]
+            out[key] = states[:, start : start + size].astype(space[key].dtype)
+            start += size
+        return out
 
     def _setup_model(self) -> None:
         if self.task_json is not None and (
@@ -260,7 +302,22 @@ class SwirlDQN(DQN):
             if "n_indices" not in fe_kwargs and self.task is not None:
                 fe_kwargs["n_indices"] = self.task.n_indices
                 self.policy_kwargs = {**self.policy_kwargs, "features_extractor_kwargs": fe_kwargs}
-        super()._setup_model()
+        dict_n_step = (
+            self.replay_buffer_class is None
+            and isinstance(self.observation_space, spaces.Dict)
+            and self.n_steps > 1
+        )
+        if dict_n_step:  # SB3 has n-step returns for Box observations only
+            self.replay_buffer_class = DictNStepReplayBuffer
+            self.replay_buffer_kwargs = {
+                **self.replay_buffer_kwargs,
+                "n_steps": self.n_steps,
+                "gamma": self.gamma,
+            }
+        with warnings.catch_warnings():
+            if dict_n_step:  # it says n_steps is ignored, which this buffer's kwargs undo
+                warnings.filterwarnings("ignore", message="`n_steps=", category=UserWarning)
+            super()._setup_model()
         if self._demo_data is not None and self._demo is None:  # after `load`
             self._demo = self._demo_tensors(self._demo_data)
 
@@ -355,10 +412,13 @@ class SwirlDQN(DQN):
         reward 1 on their last transition.
         """
         task = self.task
-        assert task is not None and isinstance(self.observation_space, spaces.Box)
-        low, high = self.observation_space.low, self.observation_space.high
-        state_dim = low.shape[0] - task.n_indices
-        lifter = Lifter(spaces.Box(low[:state_dim], high[:state_dim]), task)
+        assert task is not None
+        unlifted = self.observation_space
+        if isinstance(unlifted, spaces.Dict):
+            unlifted = spaces.Dict({k: v for k, v in unlifted.items() if k != SEGMENT_KEY})
+            lifter = Lifter(unlifted, task, self._state_keys())
+        else:
+            lifter = Lifter(self._demo_space(), task)
         out = []
         for demo in self.demonstrations or []:
             states, n = demo.observations, len(demo)
@@ -374,11 +434,14 @@ class SwirlDQN(DQN):
                 rewards.append(float(reward))
                 if terminated:
                     break
-            obs = lifter.lift(states[: len(index)], np.array(index))
+            obs = _cast(
+                lifter.lift(self._as_observations(states[: len(index)]), np.array(index)),
+                self.observation_space,
+            )
             out.append(
                 {
-                    "obs": obs[:-1].astype(self.observation_space.dtype),
-                    "next_obs": obs[1:].astype(self.observation_space.dtype),
+                    "obs": _take(obs, slice(None, -1)),
+                    "next_obs": _take(obs, slice(1, None)),
                     "segment": np.array(index[:-1]),
                     "reward": np.array(rewards),
                     "done": np.arange(len(rewards)) == len(rewards) - 1,
@@ -405,6 +468,11 @@ class SwirlDQN(DQN):
         list of int arrays of shape (T,)
         """
         assert self.task is not None and self.env is not None
+        if isinstance(self.observation_space, spaces.Dict):
+            raise ValueError(
+                "inferring demo actions needs a flat Box observation; on Dict observations "
+                "give demos with actions"
+            )
         state_dim = self.observation_space.shape[0] - self.task.n_indices  # type: ignore[index]
         n_actions = int(self.action_space.n)  # type: ignore[attr-defined]
         vec_norm = self._vec_normalize_env
@@ -462,13 +530,17 @@ class SwirlDQN(DQN):
                 stacklevel=2,
             )
             return {"loss": float("nan"), "accuracy": float("nan"), "n_pairs": 0}
-        data = {k: np.concatenate([d[k] for d in demos]) for k in demos[0] if k != "states"}
+        data = {k: _concatenate([d[k] for d in demos]) for k in demos[0] if k != "states"}
         data["actions"] = data["actions"].astype(np.int64)
         vec_norm = self._vec_normalize_env
         if vec_norm is not None and vec_norm.training and vec_norm.norm_obs:
             # else BC fits inputs normalised by the statistics of a reset or two, which the
             # first rollouts then move far away
-            vec_norm.obs_rms.update(data["obs"])
+            if isinstance(data["obs"], dict):
+                for key in vec_norm.norm_obs_keys:
+                    vec_norm.obs_rms[key].update(data["obs"][key])
+            else:
+                vec_norm.obs_rms.update(data["obs"])
         self._demo_data = data
         self._demo = self._demo_tensors(data)
         info = self._behaviour_clone()
@@ -481,7 +553,7 @@ class SwirlDQN(DQN):
         counts = np.bincount(data["segment"])
         self._demo_gen = self._torch_generator(3)
         return {
-            "obs": th.as_tensor(data["obs"], device=self.device),
+            "obs": _map(data["obs"], lambda a: th.as_tensor(a, device=self.device)),
             "actions": th.as_tensor(data["actions"], device=self.device),
             "weights": th.as_tensor(1.0 / counts[data["segment"]], dtype=th.float64),
         }
@@ -490,18 +562,18 @@ class SwirlDQN(DQN):
         seed = int(np.random.SeedSequence(self.seed).generate_state(1)[0]) + stream
         return th.Generator().manual_seed(seed)
 
-    def _demo_obs(self, rows: th.Tensor | None = None) -> th.Tensor:
+    def _demo_obs(self, rows: th.Tensor | None = None) -> Any:
         """Demo observations as the Q-network sees them now.
 
         The demo tensors hold raw observations; under ``VecNormalize`` they are normalised with
         its current statistics at every use, as SB3's replay buffer does with its samples.
         """
         assert self._demo is not None
-        obs = self._demo["obs"] if rows is None else self._demo["obs"][rows]
+        obs = self._demo["obs"] if rows is None else _take(self._demo["obs"], rows)
         if self._vec_normalize_env is None:
             return obs
-        normalized = self._vec_normalize_env.normalize_obs(obs.cpu().numpy())
-        return th.as_tensor(normalized, device=self.device)
+        normalized = self._vec_normalize_env.normalize_obs(_map(obs, lambda t: t.cpu().numpy()))
+        return _map(normalized, lambda a: th.as_tensor(a, device=self.device))
 
     def _supervised_loss(self, q: th.Tensor, actions: th.Tensor) -> th.Tensor:
         if self.bc_loss == "cross_entropy":
@@ -525,7 +597,7 @@ class SwirlDQN(DQN):
             )
             losses = []
             for batch in draw.to(self.device).split(batch_size):
-                loss = self._supervised_loss(self.q_net(obs[batch]), actions[batch])
+                loss = self._supervised_loss(self.q_net(_take(obs, batch)), actions[batch])
                 optimizer.zero_grad()
                 loss.backward()
                 th.nn.utils.clip_grad_norm_(self.q_net.parameters(), self.max_grad_norm)
@@ -557,8 +629,8 @@ class SwirlDQN(DQN):
             done = data["done"][rows]
             truncated = ~done & (t == length - 1)
             self.replay_buffer.add(  # type: ignore[union-attr]
-                data["obs"][rows],
-                data["next_obs"][rows],
+                _take(data["obs"], rows),
+                _take(data["next_obs"], rows),
                 data["actions"][rows][:, None],
                 data["reward"][rows],
                 done,
@@ -598,3 +670,24 @@ class SwirlDQN(DQN):
             reset_num_timesteps=reset_num_timesteps,
             progress_bar=progress_bar,
         )
+
+
+# Demo observations are arrays (Box observations) or dicts of arrays (Dict observations).
+def _map(obs: Any, fn: Any) -> Any:
+    return {key: fn(value) for key, value in obs.items()} if isinstance(obs, dict) else fn(obs)
+
+
+def _take(obs: Any, rows: Any) -> Any:
+    return _map(obs, lambda value: value[rows])
+
+
+def _concatenate(parts: list[Any]) -> Any:
+    if isinstance(parts[0], dict):
+        return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
+    return np.concatenate(parts)
+
+
+def _cast(obs: Any, space: spaces.Space) -> Any:
+    if isinstance(obs, dict):
+        return {key: value.astype(space[key].dtype) for key, value in obs.items()}
+    return obs.astype(space.dtype)

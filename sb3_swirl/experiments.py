@@ -68,6 +68,11 @@ class Preset:
         return dict(self.swirl["demos"].get("env_kwargs") or {})
 
     @property
+    def state_key(self) -> str | list[str] | None:
+        """What a demo records of a ``Dict`` observation (the wrapper's ``state_key``)."""
+        return self.swirl.get("state_key")
+
+    @property
     def total_timesteps(self) -> int:
         """The training budget (``n_timesteps``)."""
         return int(load_hyperparams("swirl_dqn", self.env_id)["n_timesteps"])
@@ -81,9 +86,24 @@ PRESETS: dict[str, Preset] = {
     "linecutting": Preset("sb3_swirl/DVRKLineCutting-v0", 500, 10, 0.95),
     # the paper's §10.1; the segments seen from the side (x, height): reach down, lift, pull
     "tensioning": Preset("sb3_swirl/DVRKTensioning-v0", 2_000, 5, 0.95, plot_dims=(0, 2)),
+    # gymnasium-robotics' Fetch tasks, to 90% success; the segments drawn over the goal's
+    # offset from the gripper (reach: x, y), the object's (push: x, y; pick-and-place: x, z)
+    "fetchreach": Preset("sb3_swirl/FetchReachDiscrete-v0", 1_000, 20, 0.9),
+    "fetchpush": Preset("sb3_swirl/FetchPushDiscrete-v0", 5_000, 10, 0.9),
+    "fetchpickandplace": Preset(
+        "sb3_swirl/FetchPickAndPlaceDiscrete-v0", 5_000, 10, 0.9, plot_dims=(0, 2)
+    ),
 }
 
-_ZOO_ONLY_KEYS = {"n_timesteps", "policy", "env_wrapper", "normalize", "frame_stack", "callback"}
+_ZOO_ONLY_KEYS = {
+    "n_timesteps",
+    "policy",
+    "env_wrapper",
+    "env_kwargs",
+    "normalize",
+    "frame_stack",
+    "callback",
+}
 
 
 def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
@@ -112,6 +132,16 @@ def _algo_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
     return kwargs
 
 
+def _normalize_kwargs(normalize: Any) -> dict[str, Any] | None:
+    """``VecNormalize`` arguments of an rl-zoo ``normalize`` value (``true``, a mapping or its
+    string); None for ``false``."""
+    if isinstance(normalize, str):
+        normalize = eval(normalize, {})  # rl-zoo evaluates it the same way
+    if normalize is False or normalize is None:
+        return None
+    return {} if normalize is True else dict(normalize)
+
+
 def _swirl_spec(hyperparams: dict[str, Any]) -> dict[str, Any]:
     """The ``sb3_swirl.zoo.SwirlTaskWrapper`` settings of an rl-zoo entry's ``env_wrapper``."""
     wrappers = hyperparams.get("env_wrapper") or []
@@ -128,27 +158,33 @@ def _swirl_wrapper_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
     return {key: spec[key] for key in keys if key in spec}
 
 
-def rollouts_to_success(curve: list[dict[str, float]], target: float) -> int | None:
-    """Training episodes completed at the first evaluation whose success rate reaches ``target``."""
+def rollouts_to_success(
+    curve: list[dict[str, float]], target: float, key: str = "episodes"
+) -> int | None:
+    """Training episodes (or another ``key`` of the curve: ``"timesteps"``) completed at the
+    first evaluation whose success rate reaches ``target``."""
     for point in curve:
         if point["success_rate"] >= target:
-            return int(point["episodes"])
+            return int(point[key])
     return None
 
 
-def rollout_ratio(ours: dict[str, Any], theirs: dict[str, Any], target: float) -> dict[str, Any]:
+def rollout_ratio(
+    ours: dict[str, Any], theirs: dict[str, Any], target: float, key: str = "episodes"
+) -> dict[str, Any]:
     """Rollouts to ``target`` success of two runs on one seed (records with a ``curve``) and
     their ratio ours / theirs, which a run that never reaches the target *censors*: it needed
     more than the ``N`` rollouts it ran.
 
     ``kind`` says what the ratio is: ``"="`` measured; ``"<"`` an upper bound (only ours
     reached: ours / N_theirs); ``">"`` a lower bound (only theirs reached); ``"?"`` unknown
-    (neither reached, or theirs reached before finishing a rollout).
+    (neither reached, or theirs reached before finishing a rollout). ``key`` counts env steps
+    (``"timesteps"``) instead of rollouts.
     """
     out: dict[str, Any] = {"target": target}
     for name, run in (("ours", ours), ("theirs", theirs)):
-        out[name] = rollouts_to_success(run["curve"], target)
-        out[f"{name}_rollouts_run"] = int(run["curve"][-1]["episodes"]) if run["curve"] else 0
+        out[name] = rollouts_to_success(run["curve"], target, key)
+        out[f"{name}_rollouts_run"] = int(run["curve"][-1][key]) if run["curve"] else 0
     s, t = out["ours"], out["theirs"]
     if t == 0 or (s is None and t is None):
         out.update(ratio=None, kind="?")
@@ -209,7 +245,8 @@ def train_and_evaluate(
     """Train ``algo`` ("swirl_dqn" or "dqn") and evaluate true success along the way.
 
     ``hyperparams`` (rl-zoo format) default to ``zoo_configs/{algo}.yml``'s for the env.
-    ``env_kwargs`` go to ``gym.make`` for the training and evaluation envs; ``max_episodes``
+    ``env_kwargs`` go to ``gym.make`` for the training and evaluation envs, over the entry's
+    own ``env_kwargs``; ``max_episodes``
     stops training after that many training episodes (or ``total_timesteps``, if sooner).
     Returns the learning curve (timesteps, training episodes, success rate, true return at each
     evaluation), the final success rate and the wall time; with ``keep_model``, also the trained
@@ -226,15 +263,24 @@ def train_and_evaluate(
         hyperparams = load_hyperparams(algo, preset.env_id)
     kwargs = _algo_kwargs(hyperparams)
     policy = hyperparams.get("policy", "MlpPolicy")
+    env_kwargs = {**(hyperparams.get("env_kwargs") or {}), **(env_kwargs or {})}
 
     def make(env_seed: int) -> gym.Env:
-        env = gym.make(preset.env_id, **(env_kwargs or {}))
+        env = gym.make(preset.env_id, **env_kwargs)
         if algo == "swirl_dqn":
             env = SwirlWrapper(env, task, **_swirl_wrapper_kwargs(hyperparams))
         env.reset(seed=env_seed)
         return env
 
     env, eval_env = make(seed), make(seed + 10_000)
+    normalize = _normalize_kwargs(hyperparams.get("normalize", False))
+    if normalize is not None:  # rl-zoo's `normalize`: VecNormalize, statistics synced to eval
+        from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+        env = VecNormalize(DummyVecEnv([lambda: env]), **normalize)
+        eval_env = VecNormalize(
+            DummyVecEnv([lambda: eval_env]), training=False, **{**normalize, "norm_reward": False}
+        )
     if algo == "swirl_dqn":
         model = SwirlDQN(policy, env, demonstrations=demos, seed=seed, **kwargs)
     else:
@@ -327,7 +373,8 @@ def _save_final_frame(
     from swirl_wrappers import SwirlWrapper
 
     try:
-        env = gym.make(preset.env_id, render_mode="rgb_array")
+        env_kwargs = hyperparams.get("env_kwargs") or {}
+        env = gym.make(preset.env_id, render_mode="rgb_array", **env_kwargs)
         env = SwirlWrapper(env, task, **_swirl_wrapper_kwargs(hyperparams))
         greedy_infos(model, env, seed)
         picture = env.render()
@@ -384,7 +431,12 @@ def run_demo(
 
     console.rule(f"[bold]SWIRL vs DQN on {preset.env_id}")
     demos = collect_demos(
-        preset.env_id, n_demos, seed=seed, progress=progress, **preset.demo_env_kwargs
+        preset.env_id,
+        n_demos,
+        seed=seed,
+        progress=progress,
+        state_key=preset.state_key,
+        **preset.demo_env_kwargs,
     )
     console.print(f"{n_demos} supervisor demos, {sum(len(d) for d in demos)} steps")
     fit_start = time.perf_counter()
@@ -421,7 +473,7 @@ def run_demo(
 
         plot_sheet(*models[0], path=out / "sheet.png", seed=seed)
         pictures.append("sheet.png")
-    if preset.env_id.startswith("sb3_swirl/DVRK"):
+    if preset.env_id.startswith(("sb3_swirl/DVRK", "sb3_swirl/Fetch")):
         frame = out / "final_frame.png"
         if _save_final_frame(models[0][0], preset, task, runs[0]["hyperparams"], seed, frame):
             pictures.append(frame.name)
@@ -850,14 +902,20 @@ def method_run(
     changes = {"env_id": env_id, "eval_freq": eval_freq, "n_eval_episodes": n_eval_episodes}
     chosen = replace(chosen, **{k: v for k, v in changes.items() if v is not None})
     # pure exploration learns from no demos: do not run the supervisor for it
-    pure = method in ("dqn", "dqn_rbf")
+    pure = method in ("dqn", "dqn_rbf", "dqn_her")
     n = chosen.n_demos if n_demos is None else n_demos
     demo_env = chosen.env_id if demo_env_id is None else demo_env_id
     # a sweep runs hundreds of fits in worker processes: keep their warnings in the record
     # (the summary counts them) instead of interleaving them with the progress bar
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        demos = [] if pure else collect_demos(demo_env, n, seed=seed, **chosen.demo_env_kwargs)
+        demos = (
+            []
+            if pure
+            else collect_demos(
+                demo_env, n, seed=seed, state_key=chosen.state_key, **chosen.demo_env_kwargs
+            )
+        )
         record = run_method(
             method,
             chosen,
@@ -921,6 +979,12 @@ class Experiment:
     quick_seeds: int = 1
     #: method pairs (ours, theirs) whose rollouts to the target are compared per seed
     ratios: tuple[tuple[str, str], ...] = ()
+    #: what learning is counted in: ``"episodes"`` (rollouts, the paper's) or ``"timesteps"``
+    x_key: str = "episodes"
+
+    @property
+    def counted(self) -> str:
+        return "env steps" if self.x_key == "timesteps" else "rollouts"
 
 
 #: ``--quick``'s budget and evaluation schedule
@@ -934,6 +998,7 @@ METHOD_LABELS = {
     "swirl_maxent_model": "SWIRL, MaxEnt rewards (true dynamics)",
     "dqn": "Q-learning (DQN)",
     "dqn_rbf": "RBF Q-learning",
+    "dqn_her": "DQN + HER",
     "bc_linear_svm": "linear SVM",
     "bc_rbf_svm": "RBF SVM",
     "qinit": "Q-init",
@@ -965,6 +1030,7 @@ def _methods(*names: str, **variants: dict[str, Any]) -> dict[str, dict[str, Any
 
 
 _LONG_RL = {"steps": 1_000_000, "eval_freq": 5_000}  # Fig. 2's pure RL on parking
+_FETCH, _V0 = "sb3_swirl/Fetch", "Discrete-v0"
 _LINKS = tuple(
     (length, {"env_kwargs": {"link_length_2": length}}) for length in (1.0, 1.25, 1.5, 1.75, 2.0)
 )
@@ -1120,6 +1186,26 @@ EXPERIMENTS: dict[str, Experiment] = {
         },
         _methods("swirl", "swirl_maxent", "dqn", "global_irl", "bc_linear_svm"),
     ),
+    "fetch": Experiment(
+        "fetch",
+        "SWIRL on gymnasium-robotics' Fetch tasks (2 cm steps, 10 demos) against HER",
+        "(not in the paper) our goal: SwirlDQN reaches 90% on push in at most 1/5 of the env "
+        "steps DQN + HER needs",
+        {
+            "reach": Panel("reach, 10 demos", "fetchreach", f"{_FETCH}Reach{_V0}", 20_000),
+            "push": Panel("push, 10 demos", "fetchpush", f"{_FETCH}Push{_V0}", 100_000),
+            "pickandplace": Panel(
+                "pick and place, 10 demos",
+                "fetchpickandplace",
+                f"{_FETCH}PickAndPlace{_V0}",
+                100_000,
+            ),
+        },
+        _methods("swirl", "dqn", "dqn_her", "bc_rbf_svm"),
+        x_label="env steps",
+        ratios=(("swirl", "dqn_her"), ("swirl", "dqn")),
+        x_key="timesteps",
+    ),
 }
 
 
@@ -1159,14 +1245,17 @@ def _jobs(
 
 def _summary(experiment: Experiment, runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per panel, method and swept value: the seeds' final success (mean, std), best success,
-    median rollouts to the target (never: None) and how many seeds reached it."""
+    median rollouts (env steps, for ``x_key="timesteps"``) to the target (never: None) and how
+    many seeds reached it."""
     rows = []
     groups: dict[tuple[str, str, Any], list[dict[str, Any]]] = {}
     for run in runs:
         groups.setdefault((run["panel"], run["label"], run["x"]), []).append(run)
     for (panel, label, x), group in groups.items():
         finals = [r["final_success"] for r in group]
-        reached = [r["rollouts_to_target"] for r in group if r["rollouts_to_target"] is not None]
+        target = PRESETS[experiment.panels[panel].preset].target_success
+        counts = [rollouts_to_success(r["curve"], target, experiment.x_key) for r in group]
+        reached = [count for count in counts if count is not None]
         median = float(np.median(reached + [np.inf] * (len(group) - len(reached))))
         rows.append(
             {
@@ -1264,7 +1353,7 @@ def reproduce(
     _print_summary(experiment, summary)
     ratios = _ratios(experiment, runs)
     for row in ratios:
-        console.print(_ratio_line(row), soft_wrap=True)
+        console.print(_ratio_line(row, experiment.counted), soft_wrap=True)
     warned = sum(bool(run.get("warnings")) for run in runs)
     if warned:
         console.print(f"{warned} of {len(runs)} runs warned (their fits: runs[].warnings)")
@@ -1300,18 +1389,20 @@ def _ratios(experiment: Experiment, runs: list[dict[str, Any]]) -> list[dict[str
             if not seeds:
                 continue
             rows = [
-                {"seed": s} | rollout_ratio(mine[ours, s], mine[theirs, s], target) for s in seeds
+                {"seed": s}
+                | rollout_ratio(mine[ours, s], mine[theirs, s], target, experiment.x_key)
+                for s in seeds
             ]
             pair = {"panel": panel, "x": x, "ours": ours, "theirs": theirs, "seeds": rows}
             out.append(pair | summarise_ratios(rows))
     return out
 
 
-def _ratio_line(row: dict[str, Any]) -> str:
+def _ratio_line(row: dict[str, Any], counted: str = "rollouts") -> str:
     names = " / ".join(METHOD_LABELS.get(row[k], row[k]) for k in ("ours", "theirs"))
     where = row["panel"] + ("" if row["x"] is None else f" at {row['x']}")
     n = row["n_seeds"]
-    head = f"{where}: rollouts to {row['seeds'][0]['target']:.0%}, {names}:"
+    head = f"{where}: {counted} to {row['seeds'][0]['target']:.0%}, {names}:"
     if row["median"] is None:
         return f"{head} unresolved (half the {n} seeds or more have no upper bound)"
     return (
@@ -1324,7 +1415,8 @@ def _print_summary(experiment: Experiment, summary: list[dict[str, Any]]) -> Non
     swept = any(row["x"] is not None for row in summary)
     table = Table(title=f"{experiment.title} (true success over the seeds)")
     columns = ["panel", "method"] + (["x"] if swept else [])
-    columns += ["seeds", "final success", "rollouts to 95% (median)", "seeds reaching 95%"]
+    counted = experiment.counted
+    columns += ["seeds", "final success", f"{counted} to target (median)", "seeds reaching it"]
     for column in columns:
         table.add_column(column)
     for row in summary:
@@ -1390,7 +1482,8 @@ def _plot_experiment(
             curves = [r["curve"] for r in these]
             n = min(len(c) for c in curves)
             success = np.array([[p["success_rate"] for p in c[:n]] for c in curves])
-            episodes = np.array([[p["episodes"] for p in c[:n]] for c in curves]).mean(axis=0)
+            key = experiment.x_key
+            episodes = np.array([[p[key] for p in c[:n]] for c in curves]).mean(axis=0)
             if n == 1:  # behavioural cloning: no rollouts
                 ax.axhline(success.mean(), linestyle="--", color=color, label=text)
                 continue

@@ -22,7 +22,13 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvO
 
 from swirl_wrappers import Lifter, RewardConfig, SegmentTracker, SwirlWrapper, TaskModel
 from swirl_wrappers._validation import check_int
-from swirl_wrappers.wrappers import SEGMENT_KEY, SEGMENT_REWARD_KEY, TASK_REWARD_KEY, TrackedTask
+from swirl_wrappers.wrappers import (
+    SEGMENT_KEY,
+    SEGMENT_REWARD_KEY,
+    TASK_REWARD_KEY,
+    StateKey,
+    TrackedTask,
+)
 
 __all__ = ["SwirlVecEnv", "get_swirl_attr", "make_swirl_env"]
 
@@ -58,8 +64,9 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
     task : TaskModel
     reward_config : RewardConfig or dict, optional
         Default: ``task.reward_config``.
-    state_key : str, optional
-        For Dict observations, the key of the task state (default ``"observation"``).
+    state_key : str or sequence of str, optional
+        For Dict observations, the key(s) of the task state (default ``"observation"``; see
+        :func:`swirl_wrappers.lift_observation_space`).
 
     Attributes
     ----------
@@ -92,7 +99,7 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
         venv: VecEnv,
         task: TaskModel,
         reward_config: RewardConfig | dict[str, Any] | None = None,
-        state_key: str | None = None,
+        state_key: StateKey = None,
     ) -> None:
         if not isinstance(venv, VecEnv):
             raise ValueError(

@@ -46,6 +46,7 @@ import yaml
 
 from sb3_swirl.demos import Demonstration, check_demos_fit_spaces, load_demos
 from swirl_wrappers import SwirlWrapper, TaskModel
+from swirl_wrappers.wrappers import StateKey
 
 __all__ = ["RL_ZOO3_VERSION", "SwirlTaskWrapper", "check_config", "main", "register"]
 
@@ -94,7 +95,9 @@ def _check_keys(where: str, given: Mapping[str, Any], allowed: Any) -> None:
             )
 
 
-def _load_demos(spec: Any, env: gym.Env, seed: int) -> tuple[list[Demonstration], str]:
+def _load_demos(
+    spec: Any, env: gym.Env, seed: int, state_key: StateKey
+) -> tuple[list[Demonstration], str]:
     """The demos of a ``demos:`` value and a description for messages."""
     if isinstance(spec, str | os.PathLike):
         path = Path(spec).expanduser()
@@ -121,27 +124,35 @@ def _load_demos(spec: Any, env: gym.Env, seed: int) -> tuple[list[Demonstration]
             "a demo file (`demos: path/to/demos.npz`, written by sb3_swirl.save_demos)"
         )
     demos = collect_demos(
-        env_id, spec["n_demos"], seed=spec.get("seed", seed), **spec.get("env_kwargs", {})
+        env_id,
+        spec["n_demos"],
+        seed=spec.get("seed", seed),
+        state_key=state_key if isinstance(env.observation_space, gym.spaces.Dict) else None,
+        **spec.get("env_kwargs", {}),
     )
     return list(demos), f"{spec['n_demos']} supervisor demos of {env_id}"
 
 
 def _check_demos_fit_env(
-    demos: list[Demonstration], source: str, env: gym.Env, state_key: str | None
+    demos: list[Demonstration], source: str, env: gym.Env, state_key: StateKey
 ) -> None:
     """Refuse demos whose states or actions do not match ``env``'s spaces, naming ``source``."""
     space = env.observation_space
-    if state_key is not None and isinstance(space, gym.spaces.Dict):
-        space = space[state_key]
+    if isinstance(space, gym.spaces.Dict):
+        keys = [state_key or "observation"] if isinstance(state_key, str | None) else state_key
+        size = sum(int(np.prod(space[key].shape)) for key in keys if key in space.spaces)
+        hint = f" (the state under {list(keys)})"
+    else:
+        size, hint = int(np.prod(space.shape)), f" ({space})"
     name = env.spec.id if env.spec is not None else "the env"
     discrete = isinstance(env.action_space, gym.spaces.Discrete)
     check_demos_fit_spaces(
         demos,
-        int(np.prod(space.shape)),
+        size,
         int(env.action_space.n) if discrete else None,  # type: ignore[attr-defined]
         f"{source}, demo",
         f"but {name}'s observations",
-        f" ({space})",
+        hint,
     )
 
 
@@ -151,7 +162,7 @@ def _fitted_task(
     task: Any,
     fit: Mapping[str, Any],
     seed: int,
-    state_key: str | None,
+    state_key: StateKey,
 ) -> tuple[TaskModel, list[Demonstration] | None]:
     """The task (fitted, or read from ``task``) and the demos, once per spec."""
     from sb3_swirl.fitting import fit_task
@@ -171,7 +182,7 @@ def _fitted_task(
         return _FITTED[key]
     demonstrations = None
     if demos is not None:
-        demonstrations, source = _load_demos(demos, env, seed)
+        demonstrations, source = _load_demos(demos, env, seed, state_key)
         _check_demos_fit_env(demonstrations, source, env, state_key)
     if task is not None:
         path = Path(task).expanduser()
@@ -230,7 +241,7 @@ class SwirlTaskWrapper(SwirlWrapper):
         seed: int = 0,
         reward_config: Mapping[str, Any] | None = None,
         terminate_on_completion: bool = False,
-        state_key: str | None = None,
+        state_key: StateKey = None,
     ) -> None:
         saved = os.environ.get(TASK_FILE_ENV)
         reward = {**(reward_config or {}), **getattr(_TRIAL, "reward_config", {})}

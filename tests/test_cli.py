@@ -322,7 +322,7 @@ def test_transfer_runs_take_demos_on_one_env_and_learn_on_another():
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "name", ["fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10"]
+    "name", ["fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "fetch"]
 )
 def test_every_figure_quick_has_every_panel_method_and_seed(name, tmp_path):
     from sb3_swirl.experiments import EXPERIMENTS, reproduce

@@ -238,6 +238,27 @@ def test_dict_state_key_picks_the_state():
     assert wrapped.segment == 1  # goal is (0.5, 0.5): dims=[1] of it is in the region
 
 
+def test_several_state_keys_are_read_joined_in_order():
+    env = PointEnv(as_dict=True)
+    # dims 1 and 2: the goal's two coordinates after the position (observation, goal)
+    task = TaskModel(
+        [Region([0.5, 0.5], np.eye(2) * 0.01, 1.0)],
+        [QuadraticReward([0.5, 0.5], np.eye(2))],
+        dims=[1, 2],
+    )
+    wrapped = SwirlWrapper(env, task, state_key=["observation", "goal"])
+    assert wrapped.state_key == ("observation", "goal")
+    obs, _ = wrapped.reset()
+    assert wrapped.segment == 1
+    np.testing.assert_array_equal(
+        wrapped.lifter.state(obs), np.concatenate([obs["observation"], obs["goal"]])
+    )
+    with pytest.raises(ValueError, match=r"task does not fit the observation spaces \['goal'"):
+        SwirlWrapper(env, line_task(), state_key=["goal", "goal"])
+    with pytest.raises(ValueError, match="state_key must be a key or a list of keys"):
+        SwirlWrapper(env, task, state_key=[])
+
+
 # ----------------------------------------------------------------------- validation
 @pytest.mark.parametrize(
     ("make", "message"),

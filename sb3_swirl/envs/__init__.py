@@ -1,13 +1,15 @@
 """The paper's tasks, registered with gymnasium under the ``sb3_swirl/`` namespace.
 
-The dVRK tasks (:mod:`sb3_swirl.envs.dvrk`) need the ``robosuite`` extra; their ids are
-registered here all the same, and robosuite is imported only when one is made.
+The dVRK tasks (:mod:`sb3_swirl.envs.dvrk`) need the ``robosuite`` extra and the Fetch tasks
+(:mod:`sb3_swirl.envs.fetch`) the ``fetch`` extra; their ids are registered here all the same,
+and robosuite or gymnasium-robotics is imported only when one is made.
 """
 
 from gymnasium.envs.registration import register
 
 from sb3_swirl.envs.acrobot import NoisyAcrobotEnv
 from sb3_swirl.envs.dvrk import DVRKLineCuttingEnv, DVRKTensioningEnv
+from sb3_swirl.envs.fetch import FetchDiscreteEnv
 from sb3_swirl.envs.parking import ParallelParkingEnv
 
 register(
@@ -52,4 +54,20 @@ register(
     max_episode_steps=100,
 )
 
-__all__ = ["DVRKLineCuttingEnv", "DVRKTensioningEnv", "NoisyAcrobotEnv", "ParallelParkingEnv"]
+# gymnasium-robotics' Fetch tasks in 2 cm end-effector steps; the horizons are at least 1.8x
+# the longest of 300 supervised episodes (18, 84 and 63 steps)
+for _task, _steps in (("Reach", 50), ("Push", 150), ("PickAndPlace", 150)):
+    register(
+        id=f"sb3_swirl/Fetch{_task}Discrete-v0",
+        entry_point="sb3_swirl.envs.fetch:FetchDiscreteEnv",
+        max_episode_steps=_steps,
+        kwargs={"task": _task},
+    )
+
+__all__ = [
+    "DVRKLineCuttingEnv",
+    "DVRKTensioningEnv",
+    "FetchDiscreteEnv",
+    "NoisyAcrobotEnv",
+    "ParallelParkingEnv",
+]

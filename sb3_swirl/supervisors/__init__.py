@@ -14,7 +14,7 @@ and :func:`collect_demos` runs the right one for a registered env id.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, Protocol
 
@@ -24,8 +24,14 @@ import numpy as np
 import sb3_swirl.envs  # noqa: F401  (registers the sb3_swirl/ env ids)
 from sb3_swirl.demos import Demonstration
 from sb3_swirl.supervisors.acrobot import AcrobotSupervisor
+from sb3_swirl.supervisors.fetch import (
+    FetchPickAndPlaceSupervisor,
+    FetchPushSupervisor,
+    FetchReachSupervisor,
+)
 from sb3_swirl.supervisors.line_cutting import LineCuttingSupervisor
 from sb3_swirl.supervisors.tensioning import TensioningSupervisor
+from swirl_wrappers import observation_state
 from swirl_wrappers._validation import check_int
 
 #: env id -> ``"module:Class"`` of its supervisor, imported on first use
@@ -37,6 +43,11 @@ SUPERVISORS: dict[str, str] = {
     "sb3_swirl/UnderactuatedAcrobot-v0": "sb3_swirl.supervisors.acrobot:AcrobotSupervisor",
     "sb3_swirl/DVRKLineCutting-v0": "sb3_swirl.supervisors.line_cutting:LineCuttingSupervisor",
     "sb3_swirl/DVRKTensioning-v0": "sb3_swirl.supervisors.tensioning:TensioningSupervisor",
+    "sb3_swirl/FetchReachDiscrete-v0": "sb3_swirl.supervisors.fetch:FetchReachSupervisor",
+    "sb3_swirl/FetchPushDiscrete-v0": "sb3_swirl.supervisors.fetch:FetchPushSupervisor",
+    "sb3_swirl/FetchPickAndPlaceDiscrete-v0": (
+        "sb3_swirl.supervisors.fetch:FetchPickAndPlaceSupervisor"
+    ),
 }
 
 
@@ -45,9 +56,9 @@ class Supervisor(Protocol):
 
     def __init__(self, env: gym.Env, seed: int | None = None) -> None: ...
 
-    def reset(self, obs: np.ndarray) -> None: ...
+    def reset(self, obs: Any) -> None: ...
 
-    def act(self, obs: np.ndarray) -> int: ...
+    def act(self, obs: Any) -> int: ...
 
 
 def supervisor_for(env_id: str) -> type[Supervisor]:
@@ -76,6 +87,7 @@ def collect_demos(
     progress: bool = False,
     max_attempts: int | None = None,
     return_phases: bool = False,
+    state_key: str | Sequence[str] | None = None,
     **env_kwargs: Any,
 ) -> list[Demonstration] | tuple[list[Demonstration], list[np.ndarray]]:
     """Run the env's supervisor for ``n`` successful episodes and return them as demos.
@@ -102,6 +114,11 @@ def collect_demos(
         Also return, per demo, the supervisor's phase at every action (an int array of shape
         (T,)): the ground truth of a segmentation, for supervisors that plan in phases (the
         parking supervisor: forward, reverse in, reverse out, final).
+    state_key : str or sequence of str, optional
+        For envs with ``Dict`` observations (the Fetch tasks), what a demo records: the value
+        under this key, or the values under these keys concatenated, as
+        :class:`~swirl_wrappers.SwirlWrapper` reads the task state with the same
+        ``state_key``. Default ``"observation"``.
     **env_kwargs
         Passed to ``gym.make`` (e.g. ``link_length_2=1.5``).
 
@@ -135,6 +152,11 @@ def collect_demos(
         raise ValueError(f"{supervisor_cls.__name__} does not plan in phases (no .phase)")
 
     env = gym.make(env_id, **env_kwargs)
+    if isinstance(env.observation_space, gym.spaces.Dict):
+        state_key = "observation" if state_key is None else state_key
+    elif state_key is not None:
+        env.close()
+        raise ValueError(f"state_key is for Dict observations; {env_id}'s are not")
     demos: list[Demonstration] = []
     phases: list[np.ndarray] = []
     failed: list[int] = []
@@ -142,7 +164,9 @@ def collect_demos(
         with _progress_bar(progress, f"{env_id} demos", n) as advance:
             for child in children:
                 env_seed, supervisor_seed = (int(x) for x in child.generate_state(2))
-                demo, phase = _run_episode(env, supervisor_cls, env_seed, supervisor_seed)
+                demo, phase = _run_episode(
+                    env, supervisor_cls, env_seed, supervisor_seed, state_key
+                )
                 if demo is None:
                     failed.append(env_seed)
                     if max_attempts is None:
@@ -169,7 +193,11 @@ def collect_demos(
 
 
 def _run_episode(
-    env: gym.Env, supervisor_cls: type[Supervisor], env_seed: int, supervisor_seed: int
+    env: gym.Env,
+    supervisor_cls: type[Supervisor],
+    env_seed: int,
+    supervisor_seed: int,
+    state_key: str | Sequence[str] | None,
 ) -> tuple[Demonstration | None, np.ndarray]:
     """One supervised episode and its phases (-1 without); ``None`` unless it succeeds."""
     supervisor = supervisor_cls(env.unwrapped, seed=supervisor_seed)
@@ -190,8 +218,9 @@ def _run_episode(
             break
     if not info.get("is_success", False):
         return None, np.asarray(phases)
+    states = [observation_state(obs, state_key) for obs in observations]
     demo = Demonstration(
-        observations=np.asarray(observations, dtype=np.float64),
+        observations=np.asarray(states, dtype=np.float64),
         actions=np.asarray(actions, dtype=np.int64),
         rewards=np.asarray(rewards, dtype=np.float64),
     )
@@ -214,6 +243,9 @@ def _progress_bar(enabled: bool, description: str, total: int) -> Iterator[Calla
 __all__ = [
     "SUPERVISORS",
     "AcrobotSupervisor",
+    "FetchPickAndPlaceSupervisor",
+    "FetchPushSupervisor",
+    "FetchReachSupervisor",
     "LineCuttingSupervisor",
     "Supervisor",
     "TensioningSupervisor",

@@ -10,7 +10,13 @@ from swirl_wrappers.task import (
     TaskModel,
 )
 from swirl_wrappers.tracker import SegmentTracker, progress_potential
-from swirl_wrappers.wrappers import Lifter, SwirlVectorWrapper, SwirlWrapper, lift_observation_space
+from swirl_wrappers.wrappers import (
+    Lifter,
+    SwirlVectorWrapper,
+    SwirlWrapper,
+    lift_observation_space,
+    observation_state,
+)
 
 __all__ = [
     "REWARD_MODES",
@@ -25,6 +31,7 @@ __all__ = [
     "SwirlWrapper",
     "TaskModel",
     "lift_observation_space",
+    "observation_state",
     "progress_potential",
 ]
 __version__ = "0.1.0"

@@ -6,12 +6,14 @@ segment index. Each wrapper here steps its episodes through a
 :class:`Lifter` (reading the task state from observations and appending the one-hot).
 
 ``info`` gets ``"segment"`` (index after the step), ``"task_reward"`` (the environment's own
-reward) and ``"segment_reward"`` (the reward the wrapper returns); the reset ``info`` gets
-``"segment"``. The environment's own info keys pass through.
+reward) and ``"segment_reward"`` (the reward the wrapper returns), and on a goal env
+``"segment_goal"`` (the desired goal of the step, for :meth:`SwirlWrapper.compute_reward`); the
+reset ``info`` gets ``"segment"``. The environment's own info keys pass through.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -23,33 +25,46 @@ from gymnasium.vector.utils import batch_space
 from swirl_wrappers.task import RewardConfig, TaskModel
 from swirl_wrappers.tracker import SegmentTracker
 
-__all__ = ["Lifter", "SwirlVectorWrapper", "SwirlWrapper", "lift_observation_space"]
+__all__ = [
+    "Lifter",
+    "SwirlVectorWrapper",
+    "SwirlWrapper",
+    "lift_observation_space",
+    "observation_state",
+]
 
 SEGMENT_KEY = "segment"
 TASK_REWARD_KEY, SEGMENT_REWARD_KEY = "task_reward", "segment_reward"
+#: info key of a goal env's step: the desired goal the segment reward was computed with
+GOAL_KEY = "segment_goal"
+
+
+StateKey = str | Sequence[str] | None
 
 
 def lift_observation_space(
-    space: gym.Space, task: TaskModel, state_key: str | None = None
-) -> tuple[spaces.Box | spaces.Dict, str | None]:
+    space: gym.Space, task: TaskModel, state_key: StateKey = None
+) -> tuple[spaces.Box | spaces.Dict, str | tuple[str, ...] | None]:
     """Check that ``task`` fits observations from ``space`` and build the lifted space.
 
     Parameters
     ----------
     space : gymnasium.spaces.Box or gymnasium.spaces.Dict
         The environment's (single) observation space. A Box must be 1-D; a Dict must hold a
-        1-D Box under ``state_key`` and no ``"segment"`` key.
+        1-D Box under each ``state_key`` and no ``"segment"`` key.
     task : TaskModel
-    state_key : str, optional
-        For Dict spaces, the key of the state the task reads; default ``"observation"``.
+    state_key : str or sequence of str, optional
+        For Dict spaces, the key of the state the task reads; default ``"observation"``. With
+        several keys, the task reads their 1-D Boxes concatenated in that order (e.g.
+        ``["observation", "desired_goal"]`` on a goal-conditioned env).
 
     Returns
     -------
     lifted : Box or Dict
         Box: ``low``/``high`` extended with ``task.n_indices`` zeros/ones, same dtype. Dict: the
         same keys plus ``"segment"``, a ``Box(0, 1, (task.n_indices,), float32)``.
-    state_key : str or None
-        The key to read the task state from (``None`` for Box spaces).
+    state_key : str, tuple of str or None
+        The key(s) to read the task state from (``None`` for Box spaces).
 
     Examples
     --------
@@ -85,14 +100,30 @@ def lift_observation_space(
                     f"the task state, one of {sorted(space.spaces)}"
                 )
             state_key = "observation"
-        if state_key not in space.spaces:
-            raise ValueError(
-                f"state_key {state_key!r} is not in the observation space; keys are "
-                f"{sorted(space.spaces)}"
-            )
+        keys = (state_key,) if isinstance(state_key, str) else tuple(state_key)
+        if not keys or not all(isinstance(key, str) for key in keys):
+            raise ValueError(f"state_key must be a key or a list of keys, got {state_key!r}")
+        for key in keys:
+            if key not in space.spaces:
+                raise ValueError(
+                    f"state_key {key!r} is not in the observation space; keys are "
+                    f"{sorted(space.spaces)}"
+                )
         if SEGMENT_KEY in space.spaces:
             raise ValueError(f"Dict observation space already has a {SEGMENT_KEY!r} key")
-        _check_state_space(space.spaces[state_key], task, f"observation space[{state_key!r}]")
+        if len(keys) == 1:
+            state_key = keys[0]
+            _check_state_space(space.spaces[state_key], task, f"observation space[{state_key!r}]")
+        else:
+            state_key = keys
+            for key in keys:
+                _check_state_space(space.spaces[key], None, f"observation space[{key!r}]")
+            joined = spaces.Box(
+                np.concatenate([space.spaces[key].low for key in keys]),
+                np.concatenate([space.spaces[key].high for key in keys]),
+                dtype=np.float64,
+            )
+            _check_state_space(joined, task, f"observation spaces {list(keys)} joined")
         segment = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
         return spaces.Dict({**space.spaces, SEGMENT_KEY: segment}), state_key
     raise ValueError(
@@ -100,16 +131,36 @@ def lift_observation_space(
     )
 
 
-def _check_state_space(space: gym.Space, task: TaskModel, name: str) -> None:
+def _check_state_space(space: gym.Space, task: TaskModel | None, name: str) -> None:
     if not isinstance(space, spaces.Box) or len(space.shape) != 1:
         raise ValueError(
             f"{name} must be a 1-D Box to hold the task state, got {space}; flatten it first "
             "(gymnasium.wrappers.FlattenObservation)"
         )
+    if task is None:
+        return
     try:
         task.check_state_dim(space.shape[0])
     except ValueError as exc:
         raise ValueError(f"task does not fit the {name} {space}: {exc}") from exc
+
+
+def observation_state(obs: Any, state_key: StateKey = None) -> np.ndarray:
+    """The task state in an observation (or a batch): ``obs`` itself (Box observations), the
+    value under ``state_key``, or the values under several keys concatenated in order.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> obs = {"observation": np.zeros(2), "desired_goal": np.ones(1)}
+    >>> observation_state(obs, ["observation", "desired_goal"])
+    array([0., 0., 1.])
+    """
+    if state_key is None:
+        return obs
+    if isinstance(state_key, str):
+        return obs[state_key]
+    return np.concatenate([obs[key] for key in state_key], axis=-1)
 
 
 class Lifter:
@@ -120,17 +171,17 @@ class Lifter:
     space : Box or Dict
         The (single) observation space of the environment.
     task : TaskModel
-    state_key : str, optional
+    state_key : str or sequence of str, optional
         As in :func:`lift_observation_space`.
 
     Attributes
     ----------
     observation_space : Box or Dict
         The lifted space (:func:`lift_observation_space`).
-    state_key : str or None
+    state_key : str, tuple of str or None
     """
 
-    def __init__(self, space: gym.Space, task: TaskModel, state_key: str | None = None) -> None:
+    def __init__(self, space: gym.Space, task: TaskModel, state_key: StateKey = None) -> None:
         self.observation_space, self.state_key = lift_observation_space(space, task, state_key)
         lifted = self.observation_space
         dtype = lifted.dtype if self.state_key is None else lifted[SEGMENT_KEY].dtype
@@ -139,7 +190,7 @@ class Lifter:
 
     def state(self, obs: Any) -> np.ndarray:
         """The task state in an (unlifted) observation or batch of observations."""
-        return obs if self.state_key is None else obs[self.state_key]
+        return observation_state(obs, self.state_key)
 
     def lift(self, obs: Any, index: Any) -> Any:
         """``obs`` with the one-hot of ``index`` appended: an int for one observation, an array
@@ -168,6 +219,11 @@ class TrackedTask:
     @property
     def terminate_on_completion(self) -> bool:
         return self.tracker.terminate_on_completion
+
+    @property
+    def state_key(self) -> str | tuple[str, ...] | None:
+        """The observation key(s) the task state is read from (``None``: Box observations)."""
+        return self.lifter.state_key
 
 
 def _refuse_normalised_states(env: Any, wrapper: str) -> None:
@@ -205,8 +261,9 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         End the episode (``terminated=True``) when the last region is reached. With SB3, keep
         ``Monitor`` outside this wrapper so that it records such episodes (``make_swirl_env``
         does).
-    state_key : str, optional
-        For Dict observations, the key holding the task state (default ``"observation"``).
+    state_key : str or sequence of str, optional
+        For Dict observations, the key holding the task state (default ``"observation"``), or
+        keys whose values the task reads concatenated (:func:`lift_observation_space`).
 
     Attributes
     ----------
@@ -249,7 +306,7 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         task: TaskModel,
         reward_config: RewardConfig | dict[str, Any] | None = None,
         terminate_on_completion: bool = False,
-        state_key: str | None = None,
+        state_key: StateKey = None,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self,
@@ -265,6 +322,11 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.tracker = SegmentTracker(
             task, reward_config, terminate_on_completion=terminate_on_completion
         )
+        self._goal_env = hasattr(env.unwrapped, "compute_reward")
+        keys = self.lifter.state_key
+        keys = () if keys is None else (keys,) if isinstance(keys, str) else keys
+        goal_keys = getattr(env.unwrapped, "goal_keys", ("desired_goal",))
+        self._reads_goal = [key for key in keys if key in goal_keys]
 
     @property
     def segment(self) -> int:
@@ -290,7 +352,59 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         info[SEGMENT_KEY] = segment
         info[TASK_REWARD_KEY] = task_reward
         info[SEGMENT_REWARD_KEY] = reward
+        if self._goal_env:
+            info[GOAL_KEY] = np.array(obs["desired_goal"])
         return self.lifter.lift(obs, segment), reward, bool(terminated), truncated, info
+
+    def compute_reward(self, achieved_goal: Any, desired_goal: Any, info: Any) -> Any:
+        """The reward of recorded steps for other desired goals, on a goal env (vectorised, as
+        ``HerReplayBuffer`` and SB3's ``check_env`` call it).
+
+        The agent's reward is the segment part plus ``task_reward_weight`` times the env's own
+        reward. Only the latter depends on the goal when the task state does not read it, so
+        it is recomputed with the env's ``compute_reward`` and the segment part is kept from
+        ``info``: hindsight relabelling works with SWIRL on the goal-independent states.
+
+        Raises
+        ------
+        AttributeError
+            If the wrapped env is not a goal env (has no ``compute_reward``).
+        ValueError
+            For a goal other than the step's when the task reads the goal (a ``state_key``
+            among the env's ``goal_keys``, default ``("desired_goal",)``): the segment, and so
+            the segment reward, follows the whole path under the goal the episode was run
+            with, and relabelling one transition cannot redo that.
+        """
+        if not self._goal_env:
+            raise AttributeError(f"{type(self.env.unwrapped).__name__} is not a goal env")
+        infos = [info] if isinstance(info, dict) else list(info)
+        recorded = [i.get(GOAL_KEY) for i in infos]
+        if self._reads_goal and (
+            any(goal is None for goal in recorded)
+            or not np.array_equal(np.reshape(recorded, np.shape(desired_goal)), desired_goal)
+        ):
+            raise ValueError(
+                f"SwirlWrapper refuses relabelled goals (HerReplayBuffer): its task reads "
+                f"{self._reads_goal}, so the segment reward follows the path under the "
+                "episode's own goal and cannot be recomputed for another one. Give the task a "
+                "state without the goal (e.g. state_key='observation') to use hindsight "
+                "relabelling, or train without HerReplayBuffer"
+            )
+        if any(SEGMENT_REWARD_KEY not in i or TASK_REWARD_KEY not in i for i in infos):
+            raise ValueError(
+                "SwirlWrapper.compute_reward needs each step's info (its 'segment_reward' and "
+                "'task_reward'); with HerReplayBuffer pass "
+                "replay_buffer_kwargs=dict(copy_info_dict=True)"
+            )
+        segment_rewards = np.array([i[SEGMENT_REWARD_KEY] for i in infos], dtype=np.float64)
+        task_rewards = np.array([i[TASK_REWARD_KEY] for i in infos], dtype=np.float64)
+        env_rewards = np.asarray(
+            self.env.get_wrapper_attr("compute_reward")(achieved_goal, desired_goal, info),
+            dtype=np.float64,
+        ).reshape(task_rewards.shape)
+        weight = self.reward_config.task_reward_weight
+        rewards = segment_rewards + weight * (env_rewards - task_rewards)
+        return float(rewards[0]) if isinstance(info, dict) else rewards
 
 
 class SwirlVectorWrapper(TrackedTask, VectorWrapper, gym.utils.RecordConstructorArgs):
@@ -342,7 +456,7 @@ class SwirlVectorWrapper(TrackedTask, VectorWrapper, gym.utils.RecordConstructor
         env: VectorEnv,
         task: TaskModel,
         reward_config: RewardConfig | dict[str, Any] | None = None,
-        state_key: str | None = None,
+        state_key: StateKey = None,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, task=task, reward_config=reward_config, state_key=state_key

@@ -1,0 +1,239 @@
+"""gymnasium-robotics' Fetch tasks in discrete steps, SWIRL on goal envs and on Dict
+observations, and hindsight relabelling (HER) with the SWIRL wrapper."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3 import DQN, HerReplayBuffer
+from stable_baselines3.common.buffers import NStepReplayBuffer
+from stable_baselines3.common.env_checker import check_env
+from stable_baselines3.common.utils import set_random_seed
+
+import sb3_swirl.envs  # noqa: F401  (registers the ids)
+from sb3_swirl import SwirlDQN, collect_demos, fit_task
+from sb3_swirl.baselines import run_method
+from sb3_swirl.buffers import DictNStepReplayBuffer
+from sb3_swirl.envs.fetch import FetchDiscreteEnv
+from sb3_swirl.experiments import PRESETS
+from swirl_wrappers import QuadraticReward, Region, SwirlWrapper, TaskModel
+
+pytestmark = pytest.mark.filterwarnings("ignore:.*GoalEnv.*", "ignore:.*compute_reward.*")
+
+TASKS = ("Reach", "Push", "PickAndPlace")
+KEYS = ["observation", "achieved_goal", "desired_goal", "goal_offset"]
+
+
+def _ids(task: str) -> str:
+    return f"sb3_swirl/Fetch{task}Discrete-v0"
+
+
+def _goal_task(dims: list[int]) -> TaskModel:
+    """One region at the origin of ``dims`` (a goal offset of zero)."""
+    size = len(dims)
+    return TaskModel(
+        [Region(np.zeros(size), np.eye(size) * 1e-3, 9.0)],
+        [QuadraticReward(np.zeros(size), np.eye(size))],
+        dims=dims,
+    )
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_env_checkers_and_seeding(task):
+    env = gym.make(_ids(task), goal_offset=True)
+    gym_check_env(env.unwrapped, skip_render_check=True)
+    check_env(env.unwrapped)
+    assert env.action_space.n == (8 if task == "PickAndPlace" else 6)
+
+    def rollout(seed: int) -> np.ndarray:
+        obs, _ = env.reset(seed=seed)
+        rng = np.random.default_rng(0)
+        states = [np.concatenate([obs["observation"], obs["desired_goal"]])]
+        for _ in range(10):
+            obs, *_ = env.step(int(rng.integers(env.action_space.n)))
+            states.append(np.concatenate([obs["observation"], obs["desired_goal"]]))
+        return np.array(states)
+
+    np.testing.assert_array_equal(rollout(3), rollout(3))
+    assert not np.array_equal(rollout(3), rollout(4))
+    obs, _ = env.reset(seed=5)
+    np.testing.assert_array_equal(obs["goal_offset"], obs["desired_goal"] - obs["achieved_goal"])
+    assert np.linalg.norm(obs["goal_offset"]) >= 0.1  # starts too near the goal are redrawn
+
+
+def test_steps_add_up_exactly():
+    env = gym.make(_ids("Reach"))
+    obs, _ = env.reset(seed=0)
+    start = obs["observation"][:3].copy()
+    for action in (2, 2, 2, 0, 0, 1):  # +y three times, +x twice, -x
+        obs, *_ = env.step(action)
+    np.testing.assert_allclose(env.unwrapped.target - start, [0.02, 0.06, 0.0], atol=1e-9)
+    # the arm trails the target by about a third of a step
+    assert np.abs(obs["observation"][:3] - env.unwrapped.target).max() < 0.012
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"task": "Slide"}, "task must be one of"),
+        ({"step_size": 0.1}, r"step_size must be in \(0, 0.05\]"),
+        ({"min_goal_distance": 0.5}, r"min_goal_distance must be in \[0, 0.2\]"),
+        ({"render_mode": "human"}, "render_mode must be None or 'rgb_array'"),
+    ],
+)
+def test_bad_settings_are_refused(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        FetchDiscreteEnv(**kwargs)
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_supervisors_succeed_and_demos_record_the_state_keys(task):
+    demos, phases = collect_demos(
+        _ids(task), 3, seed=1, return_phases=True, state_key=KEYS, goal_offset=True
+    )
+    width = {"Reach": 10, "Push": 25, "PickAndPlace": 25}[task] + 9
+    assert [d.observations.shape[1] for d in demos] == [width] * 3
+    assert all(len(p) == len(d) for p, d in zip(phases, demos, strict=True))
+    # the last recorded goal offset is within Fetch's 5 cm
+    assert all(np.linalg.norm(d.observations[-1, -3:]) < 0.05 for d in demos)
+    if task != "Reach":
+        assert all(len(set(p)) >= 3 for p in phases)  # the plans go through their phases
+
+
+def test_state_key_is_for_dict_observations():
+    with pytest.raises(ValueError, match="state_key is for Dict observations"):
+        collect_demos("sb3_swirl/ParallelParking-v0", 1, state_key="observation")
+
+
+# ------------------------------------------------------------------ goal envs and HER
+def test_swirl_on_gymnasium_robotics_fetch_reach_passes_sb3_check_env():
+    """The user's case of the issue: SB3's checker sees a goal env under the wrapper."""
+    import gymnasium_robotics
+
+    gym.register_envs(gymnasium_robotics)
+    env = SwirlWrapper(
+        gym.make("FetchReach-v4"),
+        _goal_task([0, 1, 2]),
+        state_key="observation",
+        reward_config={"task_reward_weight": 2.0},
+    )
+    check_env(env)
+    env.reset(seed=0)
+    obs, reward, *_, info = env.step(env.action_space.sample())
+    assert env.compute_reward(obs["achieved_goal"], obs["desired_goal"], info) == reward
+    # another goal: the segment part is kept, the env's part recomputed (-1 -> 0, weight 2)
+    relabelled = env.compute_reward(obs["achieved_goal"], obs["achieved_goal"], info)
+    assert info["task_reward"] == -1.0 and relabelled == pytest.approx(reward + 2.0)
+
+
+def test_her_works_with_a_goal_free_task_and_is_refused_when_the_task_reads_the_goal():
+    def make(state_key, dims):
+        env = gym.make(_ids("Reach"), goal_offset=True)
+        return SwirlWrapper(env, _goal_task(dims), state_key=state_key)
+
+    def her(env, **kwargs):
+        model = DQN(
+            "MultiInputPolicy",
+            env,
+            replay_buffer_class=HerReplayBuffer,
+            replay_buffer_kwargs=kwargs,
+            learning_starts=60,
+            seed=0,
+        )
+        model.learn(120)
+
+    her(make("observation", [0, 1, 2]), copy_info_dict=True)
+    with pytest.raises(ValueError, match="pass replay_buffer_kwargs=dict\\(copy_info_dict=True\\)"):
+        her(make("observation", [0, 1, 2]))
+    with pytest.raises(ValueError, match=r"refuses relabelled goals .* reads \['goal_offset'\]"):
+        her(make(["observation", "goal_offset"], [10, 11, 12]), copy_info_dict=True)
+
+
+def test_dict_n_step_buffer_samples_as_sb3s_n_step_buffer():
+    box = gym.spaces.Box(-10.0, 10.0, (2,), dtype=np.float32)
+    spaces = {"box": box, "dict": gym.spaces.Dict({"observation": box})}
+    action_space = gym.spaces.Discrete(3)
+    buffers = {
+        "box": NStepReplayBuffer(50, box, action_space, n_steps=4, gamma=0.9),
+        "dict": DictNStepReplayBuffer(50, spaces["dict"], action_space, n_steps=4, gamma=0.9),
+    }
+    rng = np.random.default_rng(0)
+    for t in range(40):
+        obs, next_obs = rng.normal(size=(2, 1, 2)).astype(np.float32)
+        done, cut = t % 7 == 6, t % 11 == 10
+        for name, buffer in buffers.items():
+            wrap = (lambda x: {"observation": x}) if name == "dict" else (lambda x: x)
+            buffer.add(
+                wrap(obs),
+                wrap(next_obs),
+                np.array([[t % 3]]),
+                np.array([float(t)]),
+                np.array([done]),
+                [{"TimeLimit.truncated": cut}],
+            )
+    batch = np.arange(40)
+    set_random_seed(0)  # both buffers draw the env column from numpy's global generator
+    box_samples = buffers["box"]._get_samples(batch)
+    set_random_seed(0)  # both buffers draw the env column from numpy's global generator
+    dict_samples = buffers["dict"]._get_samples(batch)
+    for field in ("actions", "dones", "rewards", "discounts"):
+        np.testing.assert_allclose(getattr(dict_samples, field), getattr(box_samples, field))
+    for field in ("observations", "next_observations"):
+        np.testing.assert_array_equal(
+            getattr(dict_samples, field)["observation"], getattr(box_samples, field)
+        )
+
+
+# ------------------------------------------------------------------ SwirlDQN on Dict obs
+def test_swirl_dqn_needs_every_key_in_the_task_state():
+    demos = collect_demos(_ids("Reach"), 2, seed=0, state_key="observation")
+    env = SwirlWrapper(gym.make(_ids("Reach")), _goal_task([0, 1, 2]), state_key="observation")
+    with pytest.raises(ValueError, match=r"leaves out \['achieved_goal', 'desired_goal'\]"):
+        SwirlDQN("MultiInputPolicy", env, demonstrations=demos)
+
+
+def test_swirl_dqn_clones_and_prefills_dict_demos_and_saves_them(tmp_path):
+    demos = collect_demos(_ids("Reach"), 3, seed=0, state_key=KEYS, goal_offset=True)
+    env = SwirlWrapper(
+        gym.make(_ids("Reach"), goal_offset=True), _goal_task([16, 17, 18]), state_key=KEYS
+    )
+    model = SwirlDQN(
+        "MultiInputPolicy", env, demonstrations=demos, n_steps=5, prefill_replay=True, seed=0
+    )
+    assert isinstance(model.replay_buffer, DictNStepReplayBuffer)
+    info = model.pretrain()
+    assert info["n_pairs"] == sum(len(d) for d in demos) and info["accuracy"] > 0.5
+    stored = model.replay_buffer.observations
+    assert model.replay_buffer.pos == -(-info["n_pairs"] // model.n_envs)
+    np.testing.assert_array_equal(stored["goal_offset"][0, 0], demos[0].observations[0, -3:])
+    assert set(stored) == {*KEYS, "segment"}
+    model.save(tmp_path / "model")
+    loaded = SwirlDQN.load(tmp_path / "model", env=env)
+    obs, _ = env.reset(seed=0)
+    assert loaded.predict(obs, deterministic=True)[0] == model.predict(obs, deterministic=True)[0]
+
+
+def test_swirl_dqn_learns_fetch_reach_within_a_small_budget():
+    """10 demos, 2000 env steps: the preset's SwirlDQN succeeds on the evaluation episodes."""
+    preset = dataclasses.replace(PRESETS["fetchreach"], eval_freq=1_000, n_eval_episodes=10)
+    demos = collect_demos(
+        preset.env_id, 10, seed=0, state_key=preset.state_key, **preset.demo_env_kwargs
+    )
+    result = run_method("swirl", preset, demos, seed=0, total_timesteps=2_000)
+    assert result["best_success"] > 0.0
+    assert result["n_segments"] == fit_task(demos, random_state=0, **preset.fit_kwargs).n_segments
+
+
+def test_dqn_her_and_bc_run_on_fetch_reach():
+    preset = dataclasses.replace(PRESETS["fetchreach"], eval_freq=250, n_eval_episodes=2)
+    demos = collect_demos(
+        preset.env_id, 3, seed=0, state_key=preset.state_key, **preset.demo_env_kwargs
+    )
+    her = run_method("dqn_her", preset, [], seed=0, total_timesteps=300)
+    assert her["curve"][-1]["timesteps"] >= 300
+    bc = run_method("bc_rbf_svm", preset, demos, seed=0, total_timesteps=300)
+    assert bc["curve"][-1]["timesteps"] == 0 and 0.0 <= bc["final_success"] <= 1.0
