@@ -47,6 +47,11 @@ class SwirlDQN(DQN):
     Q-learning update. ``save`` stores the lifted demo pairs with the model, so a loaded model
     trains on with the same loss.
 
+    On ``Dict`` observations (``"MultiInputPolicy"``) a demo state is the wrapper's
+    ``state_key`` values joined, which must cover every key (the Q-network sees them all), and
+    ``n_steps > 1`` uses :class:`~sb3_swirl.buffers.DictNStepReplayBuffer` (SB3 has n-step
+    returns for Box observations only).
+
     Parameters
     ----------
     policy, env, learning_rate, ..., device :

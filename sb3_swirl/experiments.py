@@ -277,9 +277,12 @@ def train_and_evaluate(
     if normalize is not None:  # rl-zoo's `normalize`: VecNormalize, statistics synced to eval
         from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-        env = VecNormalize(DummyVecEnv([lambda: env]), **normalize)
+        def vectorised(one: gym.Env) -> DummyVecEnv:
+            return DummyVecEnv([lambda: one])
+
+        env = VecNormalize(vectorised(env), **normalize)
         eval_env = VecNormalize(
-            DummyVecEnv([lambda: eval_env]), training=False, **{**normalize, "norm_reward": False}
+            vectorised(eval_env), training=False, **{**normalize, "norm_reward": False}
         )
     if algo == "swirl_dqn":
         model = SwirlDQN(policy, env, demonstrations=demos, seed=seed, **kwargs)
@@ -536,11 +539,14 @@ _TABLE1_LABELS = {
 
 def greedy_infos(policy: Any, env: gym.Env, seed: int) -> list[dict[str, Any]]:
     """The ``info`` of every step of one greedy episode of ``policy`` (anything with SB3's
-    ``predict``) in ``env``, reset with ``seed``."""
+    ``predict``) in ``env``, reset with ``seed``; a model trained under ``VecNormalize`` sees
+    the observations normalised as in training."""
+    normalizer = getattr(policy, "get_vec_normalize_env", lambda: None)()
     obs, _ = env.reset(seed=seed)
     infos = []
     while True:
-        action, _ = policy.predict(obs, deterministic=True)
+        seen = obs if normalizer is None else normalizer.normalize_obs(obs)
+        action, _ = policy.predict(seen, deterministic=True)
         obs, _, terminated, truncated, info = env.step(int(action))
         infos.append(info)
         if terminated or truncated:

@@ -466,10 +466,14 @@ def _train(argv: list[str]) -> int:
                     "task_reward_weight) would not reach the sub-processes; use the default "
                     "--vec-env dummy (Optuna's --n-jobs runs trials in parallel)"
                 )
-            check_config(algo, str(env_id), config, _custom_hyperparams(argv))
+            entry = check_config(algo, str(env_id), config, _custom_hyperparams(argv))
         except ValueError as exc:  # before anything trains: one clear line, no traceback
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        # rl_zoo3 2.9 gives an entry's env_kwargs to the training env only (its eval env and
+        # `enjoy` get those of the command line): pass them on the command line too
+        if entry.get("env_kwargs") and _option(argv, "--env-kwargs") is None:
+            argv = [*argv, "--env-kwargs", *(f"{k}:{v!r}" for k, v in entry["env_kwargs"].items())]
     _run(train, "train", argv)
     if algo == "swirl_dqn":
         _write_task(argv, str(env_id))
