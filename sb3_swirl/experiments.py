@@ -1204,7 +1204,7 @@ EXPERIMENTS: dict[str, Experiment] = {
                 "pick and place, 10 demos",
                 "fetchpickandplace",
                 f"{_FETCH}PickAndPlace{_V0}",
-                100_000,
+                50_000,
             ),
         },
         _methods("swirl", "dqn", "dqn_her", "bc_rbf_svm"),
