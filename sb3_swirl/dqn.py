@@ -21,7 +21,7 @@ from sb3_swirl.inverse_dynamics import InverseDynamics
 from sb3_swirl.vec_env import get_swirl_attr
 from swirl_wrappers import Lifter, SegmentTracker, TaskModel
 from swirl_wrappers._validation import check_bool, check_int, check_option, check_real
-from swirl_wrappers.wrappers import SEGMENT_KEY
+from swirl_wrappers.wrappers import SEGMENT_KEY, state_space
 
 __all__ = ["SwirlDQN"]
 
@@ -267,12 +267,7 @@ class SwirlDQN(DQN):
                 f"{missing}: wrap with state_key listing every key and let the task read a "
                 "part of it with fit_task(dims=...)"
             )
-        parts = [space[key] for key in keys]
-        return spaces.Box(
-            np.concatenate([part.low for part in parts]),
-            np.concatenate([part.high for part in parts]),
-            dtype=np.float64,
-        )
+        return state_space(space, keys)[0]
 
     def _state_keys(self) -> tuple[str, ...]:
         assert self.env is not None

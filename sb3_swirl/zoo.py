@@ -46,7 +46,7 @@ import yaml
 
 from sb3_swirl.demos import Demonstration, check_demos_fit_spaces, load_demos
 from swirl_wrappers import SwirlWrapper, TaskModel
-from swirl_wrappers.wrappers import StateKey
+from swirl_wrappers.wrappers import StateKey, state_space
 
 __all__ = ["RL_ZOO3_VERSION", "SwirlTaskWrapper", "check_config", "main", "register"]
 
@@ -139,9 +139,9 @@ def _check_demos_fit_env(
     """Refuse demos whose states or actions do not match ``env``'s spaces, naming ``source``."""
     space = env.observation_space
     if isinstance(space, gym.spaces.Dict):
-        keys = [state_key or "observation"] if isinstance(state_key, str | None) else state_key
-        size = sum(int(np.prod(space[key].shape)) for key in keys if key in space.spaces)
-        hint = f" (the state under {list(keys)})"
+        state, keys = state_space(space, state_key)
+        size = int(np.prod(state.shape))
+        hint = f" (the state under {[keys] if isinstance(keys, str) else list(keys)})"
     else:
         size, hint = int(np.prod(space.shape)), f" ({space})"
     name = env.spec.id if env.spec is not None else "the env"

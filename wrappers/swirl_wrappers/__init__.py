@@ -16,6 +16,7 @@ from swirl_wrappers.wrappers import (
     SwirlWrapper,
     lift_observation_space,
     observation_state,
+    state_space,
 )
 
 __all__ = [
@@ -33,5 +34,6 @@ __all__ = [
     "lift_observation_space",
     "observation_state",
     "progress_potential",
+    "state_space",
 ]
 __version__ = "0.1.0"

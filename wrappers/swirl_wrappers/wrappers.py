@@ -31,6 +31,7 @@ __all__ = [
     "SwirlWrapper",
     "lift_observation_space",
     "observation_state",
+    "state_space",
 ]
 
 SEGMENT_KEY = "segment"
@@ -93,42 +94,70 @@ def lift_observation_space(
         )
         return lifted, None
     if isinstance(space, spaces.Dict):
-        if state_key is None:
-            if "observation" not in space.spaces:
-                raise ValueError(
-                    "Dict observation space has no 'observation' key; pass state_key= naming "
-                    f"the task state, one of {sorted(space.spaces)}"
-                )
-            state_key = "observation"
-        keys = (state_key,) if isinstance(state_key, str) else tuple(state_key)
-        if not keys or not all(isinstance(key, str) for key in keys):
-            raise ValueError(f"state_key must be a key or a list of keys, got {state_key!r}")
-        for key in keys:
-            if key not in space.spaces:
-                raise ValueError(
-                    f"state_key {key!r} is not in the observation space; keys are "
-                    f"{sorted(space.spaces)}"
-                )
+        state, state_key = state_space(space, state_key)
         if SEGMENT_KEY in space.spaces:
             raise ValueError(f"Dict observation space already has a {SEGMENT_KEY!r} key")
-        if len(keys) == 1:
-            state_key = keys[0]
-            _check_state_space(space.spaces[state_key], task, f"observation space[{state_key!r}]")
+        if isinstance(state_key, str):
+            name = f"observation space[{state_key!r}]"
         else:
-            state_key = keys
-            for key in keys:
-                _check_state_space(space.spaces[key], None, f"observation space[{key!r}]")
-            joined = spaces.Box(
-                np.concatenate([space.spaces[key].low for key in keys]),
-                np.concatenate([space.spaces[key].high for key in keys]),
-                dtype=np.float64,
-            )
-            _check_state_space(joined, task, f"observation spaces {list(keys)} joined")
+            name = f"observation spaces {list(state_key)} joined"
+        _check_state_space(state, task, name)
         segment = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
         return spaces.Dict({**space.spaces, SEGMENT_KEY: segment}), state_key
     raise ValueError(
         f"SWIRL wrappers need a Box or Dict observation space, got {type(space).__name__}"
     )
+
+
+def state_space(
+    space: spaces.Dict, state_key: StateKey = None
+) -> tuple[spaces.Box, str | tuple[str, ...]]:
+    """The space of the task state in a Dict observation space, and ``state_key`` checked.
+
+    Parameters
+    ----------
+    space : gymnasium.spaces.Dict
+    state_key : str or sequence of str, optional
+        As in :func:`lift_observation_space` (default ``"observation"``).
+
+    Returns
+    -------
+    state : Box
+        The 1-D Box under ``state_key``, or those under several keys joined (float64).
+    state_key : str or tuple of str
+        One key as a str, several as a tuple.
+
+    Raises
+    ------
+    ValueError
+        A key that is missing or not a 1-D Box, or no key at all.
+    """
+    if state_key is None:
+        if "observation" not in space.spaces:
+            raise ValueError(
+                "Dict observation space has no 'observation' key; pass state_key= naming "
+                f"the task state, one of {sorted(space.spaces)}"
+            )
+        state_key = "observation"
+    keys = (state_key,) if isinstance(state_key, str) else tuple(state_key)
+    if not keys or not all(isinstance(key, str) for key in keys):
+        raise ValueError(f"state_key must be a key or a list of keys, got {state_key!r}")
+    for key in keys:
+        if key not in space.spaces:
+            raise ValueError(
+                f"state_key {key!r} is not in the observation space; keys are "
+                f"{sorted(space.spaces)}"
+            )
+    if len(keys) == 1:
+        return space.spaces[keys[0]], keys[0]
+    for key in keys:
+        _check_state_space(space.spaces[key], None, f"observation space[{key!r}]")
+    joined = spaces.Box(
+        np.concatenate([space.spaces[key].low for key in keys]),
+        np.concatenate([space.spaces[key].high for key in keys]),
+        dtype=np.float64,
+    )
+    return joined, keys
 
 
 def _check_state_space(space: gym.Space, task: TaskModel | None, name: str) -> None:
