@@ -136,6 +136,7 @@ METHODS: dict[str, str] = {
     "dqn": "pure exploration: DQN on the true reward",
     "dqn_rbf": "DQN with the paper's RBF Q-function (RBFFeaturesExtractor)",
     "dqn_her": "DQN with hindsight experience replay (SB3's HerReplayBuffer; goal envs)",
+    "swirl_her": "SwirlDQN with hindsight experience replay (goal envs; 1-step returns)",
     "bc_linear_svm": "pure demonstration: linear SVM (hinge loss, L2 alpha 5e-3)",
     "bc_rbf_svm": "pure demonstration: RBF-kernel SVM",
     "bc_mlp": "pure demonstration: a (64, 64) perceptron (scikit-learn)",
@@ -279,8 +280,17 @@ def run_method(
         result = train_and_evaluate("swirl_dqn", preset, task=task, demos=demos, **budget)
         return result | {"method": method, "n_segments": task.n_segments}
     if method == "dqn_her":
-        result = train_and_evaluate("dqn", preset, hyperparams=_her_hyperparams(preset), **budget)
+        hyperparams = _her_hyperparams(load_hyperparams("dqn", preset.env_id), preset)
+        result = train_and_evaluate("dqn", preset, hyperparams=hyperparams, **budget)
         return result | {"method": method}
+    if method == "swirl_her":
+        hyperparams = _her_hyperparams(load_hyperparams("swirl_dqn", preset.env_id), preset)
+        demos = _without_goal_offset(demos, preset)
+        task = fit_task(demos, **fit)
+        result = train_and_evaluate(
+            "swirl_dqn", preset, task=task, demos=demos, hyperparams=hyperparams, **budget
+        )
+        return result | {"method": method, "n_segments": task.n_segments}
     if method in ("dqn", "dqn_rbf"):
         hyperparams = load_hyperparams("dqn", preset.env_id)
         if method == "dqn_rbf":
@@ -369,28 +379,60 @@ def _entry_env_kwargs(preset: Any) -> dict[str, Any]:
     return dict(load_hyperparams("swirl_dqn", preset.env_id).get("env_kwargs") or {})
 
 
-def _her_hyperparams(preset: Any) -> dict[str, Any]:
-    """Plain DQN's entry with SB3's ``HerReplayBuffer`` (4 future goals per transition, as
-    in the HER paper). HER relabels ``desired_goal`` alone, so the env gets no observation
-    key computed from the goal (the Fetch tasks' ``goal_offset``)."""
+def _her_hyperparams(hyperparams: dict[str, Any], preset: Any) -> dict[str, Any]:
+    """An rl-zoo entry (``dqn`` or ``swirl_dqn``) with SB3's ``HerReplayBuffer`` (4 future
+    goals per transition, as in the HER paper). HER relabels ``desired_goal`` alone, so the
+    env gets no observation key computed from the goal (the Fetch tasks' ``goal_offset``).
+    SwirlDQN's relabelled rewards read each step's info (``copy_info_dict``); HER has 1-step
+    returns only."""
     from stable_baselines3 import HerReplayBuffer
 
-    from sb3_swirl.experiments import _normalize_kwargs, load_hyperparams
+    from sb3_swirl.experiments import _normalize_kwargs, _swirl_spec
 
-    hyperparams = load_hyperparams("dqn", preset.env_id)
     if not hyperparams.get("policy", "").startswith("MultiInput"):
-        raise ValueError(f"dqn_her needs a goal env with Dict observations; {preset.env_id} is not")
+        raise ValueError(f"HER needs a goal env with Dict observations; {preset.env_id} is not")
+    hyperparams = dict(hyperparams)
     env_kwargs = dict(hyperparams.get("env_kwargs") or {})
     env_kwargs.pop("goal_offset", None)
     normalize = _normalize_kwargs(hyperparams.get("normalize", False))
     if normalize is not None and "norm_obs_keys" in normalize:
         keys = [key for key in normalize["norm_obs_keys"] if key != "goal_offset"]
         hyperparams["normalize"] = normalize | {"norm_obs_keys": keys}
+    buffer_kwargs: dict[str, Any] = {"n_sampled_goal": 4, "goal_selection_strategy": "future"}
+    spec = _swirl_spec(hyperparams)
+    if spec:
+        state_key = [key for key in spec.get("state_key") or () if key != "goal_offset"]
+        wrapper = spec | ({"state_key": state_key} if state_key else {})
+        hyperparams["env_wrapper"] = [{"sb3_swirl.zoo.SwirlTaskWrapper": wrapper}]
+        hyperparams["n_steps"] = 1
+        buffer_kwargs["copy_info_dict"] = True
     return hyperparams | {
         "env_kwargs": env_kwargs,
         "replay_buffer_class": HerReplayBuffer,
-        "replay_buffer_kwargs": {"n_sampled_goal": 4, "goal_selection_strategy": "future"},
+        "replay_buffer_kwargs": buffer_kwargs,
     }
+
+
+def _without_goal_offset(demos: Sequence[Demonstration], preset: Any) -> list[Demonstration]:
+    """The demos' states without the Fetch tasks' ``goal_offset`` key (the last one the
+    preset's ``state_key`` lists), as an env without that key records them."""
+    import dataclasses
+
+    keys = preset.state_key
+    if not isinstance(keys, list | tuple) or "goal_offset" not in keys:
+        return list(demos)
+    if keys[-1] != "goal_offset":
+        raise ValueError(f"goal_offset must be the last state key, got {keys}")
+    size = gym.make(preset.env_id, goal_offset=True).observation_space["goal_offset"].shape[0]
+    kept = demos[0].observations.shape[1] - size if demos else 0
+    dims = preset.fit_kwargs.get("dims")
+    if dims is None or max(dims) >= kept:
+        raise ValueError(
+            f"the SWIRL task of {preset.env_id} reads the goal's offset (fit dims {dims}), "
+            "which hindsight relabelling would leave stale: swirl_her needs a task on the "
+            "observation alone"
+        )
+    return [dataclasses.replace(d, observations=d.observations[:, :-size]) for d in demos]
 
 
 def _fit_bc(

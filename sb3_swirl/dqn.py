@@ -21,7 +21,13 @@ from sb3_swirl.inverse_dynamics import InverseDynamics
 from sb3_swirl.vec_env import get_swirl_attr
 from swirl_wrappers import Lifter, SegmentTracker, TaskModel
 from swirl_wrappers._validation import check_bool, check_int, check_option, check_real
-from swirl_wrappers.wrappers import SEGMENT_KEY, state_space
+from swirl_wrappers.wrappers import (
+    GOAL_KEY,
+    SEGMENT_KEY,
+    SEGMENT_REWARD_KEY,
+    TASK_REWARD_KEY,
+    state_space,
+)
 
 __all__ = ["SwirlDQN"]
 
@@ -79,7 +85,9 @@ class SwirlDQN(DQN):
         action, the target network scores it, which curbs the over-estimation of the max.
     prefill_replay : bool
         Add the demo transitions (proxy reward, done at each demo's end) to the replay buffer,
-        in order, so that SB3's n-step returns (``n_steps > 1``) read them as DQfD does.
+        in order, so that SB3's n-step returns (``n_steps > 1``) read them as DQfD does. With
+        ``HerReplayBuffer`` (``copy_info_dict=True``) each demo is an episode whose goals are
+        relabelled as the agent's own are.
     infer_actions : {"inverse_dynamics", "none"}
         For demos without actions: label them with an :class:`InverseDynamics` model trained on
         ``inverse_dynamics_steps`` random-action steps in the env (which also go into the
@@ -444,6 +452,7 @@ class SwirlDQN(DQN):
                     "next_obs": _take(obs, slice(1, None)),
                     "segment": np.array(index[:-1]),
                     "reward": np.array(rewards),
+                    "task_reward": np.asarray(task_rewards[: len(rewards)], dtype=np.float64),
                     "done": np.arange(len(rewards)) == len(rewards) - 1,
                     "actions": None if demo.actions is None else demo.actions[: len(rewards)],
                     "states": states[: len(index)],
@@ -619,22 +628,34 @@ class SwirlDQN(DQN):
 
         Each env column gets a contiguous run of the transitions (the last column wraps around
         to the first ones), so an n-step buffer reads a demo in order; where a column's run
-        cuts a demo short, the cut is marked as a time-limit truncation, so no return is read
-        across it into the next column's or the online transitions.
+        cuts a demo short, the cut ends an episode as a time-limit truncation does, so no
+        return is read across it into the next column's or the online transitions, and
+        ``HerReplayBuffer`` draws no goal from beyond it. The infos hold the rewards' parts,
+        as the wrapper's steps do, for ``SwirlWrapper.compute_reward``.
         """
         n, n_envs = len(data["actions"]), self.n_envs
         length = -(-n // n_envs)
         order = (np.arange(length * n_envs) % n).reshape(n_envs, length).T
+        goals = data["next_obs"].get("desired_goal") if isinstance(data["obs"], dict) else None
         for t, rows in enumerate(order):
             done = data["done"][rows]
             truncated = ~done & (t == length - 1)
+            infos: list[dict[str, Any]] = [
+                {
+                    "TimeLimit.truncated": bool(truncated[i]),
+                    TASK_REWARD_KEY: float(data["task_reward"][row]),
+                    SEGMENT_REWARD_KEY: float(data["reward"][row]),
+                    **({} if goals is None else {GOAL_KEY: goals[row]}),
+                }
+                for i, row in enumerate(rows)
+            ]
             self.replay_buffer.add(  # type: ignore[union-attr]
                 _take(data["obs"], rows),
                 _take(data["next_obs"], rows),
                 data["actions"][rows][:, None],
                 data["reward"][rows],
-                done,
-                [{"TimeLimit.truncated": bool(cut)} for cut in truncated],
+                done | truncated,
+                infos,
             )
 
     def _record(self, key: str, value: float) -> None:

@@ -125,6 +125,21 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
     def has_attr(self, attr_name: str) -> bool:
         return attr_name in SWIRL_ATTRIBUTES or self.venv.has_attr(attr_name)
 
+    def env_method(
+        self,
+        method_name: str,
+        *method_args: Any,
+        indices: VecEnvIndices = None,
+        **method_kwargs: Any,
+    ) -> list[Any]:
+        if method_name == "compute_reward":  # the sub-envs' own would drop the segment reward
+            raise ValueError(
+                "SwirlVecEnv cannot relabel goals (HerReplayBuffer): the sub-envs' "
+                "compute_reward knows nothing of the segment reward. Wrap each env with "
+                "SwirlWrapper instead (make_swirl_env), whose compute_reward keeps it"
+            )
+        return self.venv.env_method(method_name, *method_args, indices=indices, **method_kwargs)
+
     def reset(self) -> VecEnvObs:
         obs = self.venv.reset()
         self.tracker.reset(self.lifter.state(obs))

@@ -150,10 +150,67 @@ def test_her_works_with_a_goal_free_task_and_is_refused_when_the_task_reads_the_
         model.learn(120)
 
     her(make("observation", [0, 1, 2]), copy_info_dict=True)
+    # what counts is the entries the task reads, not the keys the state joins
+    her(make(KEYS, [0, 1, 2]), copy_info_dict=True)
     with pytest.raises(ValueError, match="pass replay_buffer_kwargs=dict\\(copy_info_dict=True\\)"):
         her(make("observation", [0, 1, 2]))
     with pytest.raises(ValueError, match=r"refuses relabelled goals .* reads \['goal_offset'\]"):
         her(make(["observation", "goal_offset"], [10, 11, 12]), copy_info_dict=True)
+    with pytest.raises(ValueError, match=r"refuses relabelled goals .* reads \['goal_offset'\]"):
+        her(make(KEYS, [0, 16]), copy_info_dict=True)
+
+
+def test_swirl_vec_env_refuses_to_relabel_goals():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from sb3_swirl import SwirlVecEnv
+
+    venv = SwirlVecEnv(
+        DummyVecEnv([lambda: gym.make(_ids("Reach"))]), _goal_task([0, 1, 2]), state_key=KEYS[:3]
+    )
+    with pytest.raises(ValueError, match="SwirlVecEnv cannot relabel goals"):
+        venv.env_method("compute_reward", np.zeros(3), np.zeros(3), {}, indices=[0])
+    assert venv.env_method("get_wrapper_attr", "step_size") == [0.02]
+
+
+def test_swirl_dqn_with_her_prefills_demos_that_relabel_as_its_own_steps():
+    """SwirlDQN's demo transitions carry the infos HER's relabelling reads: for the episode's
+    own goal the recomputed reward is the stored one, for a reached goal it gains the weight."""
+    keys = KEYS[:3]
+    demos = collect_demos(_ids("Push"), 3, seed=0, state_key=keys)
+    weight = 10.0
+    env = SwirlWrapper(
+        gym.make(_ids("Push")),
+        fit_task(demos, dims=[6, 7, 8], indicator="velocity", random_state=0),
+        state_key=keys,
+        reward_config={"mode": "potential", "task_reward_weight": weight},
+    )
+    model = SwirlDQN(
+        "MultiInputPolicy",
+        env,
+        demonstrations=demos,
+        replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs=dict(copy_info_dict=True),
+        prefill_replay=True,
+        learning_starts=0,
+        bc_epochs=5,
+        seed=0,
+    )
+    model.pretrain()
+    buffer, n = model.replay_buffer, sum(len(d) for d in demos)
+    assert buffer.pos == n and buffer.ep_length[:n, 0].tolist() == [
+        len(d) for d in demos for _ in range(len(d))
+    ]
+    rows = np.arange(n)
+    infos = list(buffer.infos[rows, 0])
+    achieved = buffer.next_observations["achieved_goal"][rows, 0]
+    own = env.compute_reward(achieved, buffer.next_observations["desired_goal"][rows, 0], infos)
+    np.testing.assert_allclose(own, buffer.rewards[rows, 0], rtol=1e-6, atol=1e-5)
+    reached = env.compute_reward(achieved, achieved, infos)
+    missed = np.array([info["task_reward"] for info in infos]) < 0
+    assert missed.sum() == n - len(demos)  # every demo reaches the goal on its last step
+    np.testing.assert_allclose(reached[missed], own[missed] + weight, rtol=1e-6, atol=1e-4)
+    model.learn(200)  # HER samples demo episodes and relabels them
 
 
 def test_dict_n_step_buffer_samples_as_sb3s_n_step_buffer():
@@ -238,6 +295,8 @@ def test_dqn_her_and_bc_run_on_fetch_reach():
     )
     her = run_method("dqn_her", preset, [], seed=0, total_timesteps=300)
     assert her["curve"][-1]["timesteps"] >= 300
+    with pytest.raises(ValueError, match=r"reads the goal's offset .* swirl_her needs a task"):
+        run_method("swirl_her", preset, demos, seed=0, total_timesteps=300)
     bc = run_method("bc_rbf_svm", preset, demos, seed=0, total_timesteps=300)
     assert bc["curve"][-1]["timesteps"] == 0 and 0.0 <= bc["final_success"] <= 1.0
 

@@ -671,14 +671,22 @@ class TaskModel:
         """Dimension of task space (where regions and rewards live)."""
         return self.regions[0].mean.size
 
+    @property
+    def state_entries(self) -> tuple[int, ...] | None:
+        """The entries of the state that the task reads (``dims`` and ``angles``, sorted);
+        ``None`` when it reads all of them."""
+        if self.dims is None:
+            return None
+        return tuple(sorted({*self.dims, *(i for angle in self.angles or () for i in angle)}))
+
     # ------------------------------------------------------------------ functions
     def check_state_dim(self, state_dim: int) -> None:
         """Raise ``ValueError`` unless states of ``state_dim`` values fit this task.
 
         Wrappers call it once at construction so that the per-step functions need no checks.
         """
-        if self.dims is not None:
-            used = max([*self.dims, *(i for angle in self.angles or () for i in angle)])
+        if self.state_entries is not None:
+            used = max(self.state_entries)
             if state_dim <= used:
                 raise ValueError(f"observation has {state_dim} dims but the task uses index {used}")
         elif self.features is not None:

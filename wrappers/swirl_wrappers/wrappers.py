@@ -192,6 +192,24 @@ def observation_state(obs: Any, state_key: StateKey = None) -> np.ndarray:
     return np.concatenate([obs[key] for key in state_key], axis=-1)
 
 
+def _keys_read(space: gym.Space, task: TaskModel, state_key: StateKey) -> list[str]:
+    """The keys of a Dict observation whose values the task reads: those of ``state_key``
+    that hold one of the task's ``state_entries`` in the joined state."""
+    if state_key is None:
+        return []
+    keys = [state_key] if isinstance(state_key, str) else list(state_key)
+    entries = task.state_entries
+    if entries is None:
+        return keys
+    read, start = [], 0
+    for key in keys:
+        stop = start + int(np.prod(space[key].shape))
+        if any(start <= i < stop for i in entries):
+            read.append(key)
+        start = stop
+    return read
+
+
 class Lifter:
     """Reads the task state from observations and appends the one-hot segment index.
 
@@ -352,10 +370,12 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
             task, reward_config, terminate_on_completion=terminate_on_completion
         )
         self._goal_env = hasattr(env.unwrapped, "compute_reward")
-        keys = self.lifter.state_key
-        keys = () if keys is None else (keys,) if isinstance(keys, str) else keys
         goal_keys = getattr(env.unwrapped, "goal_keys", ("desired_goal",))
-        self._reads_goal = [key for key in keys if key in goal_keys]
+        self._reads_goal = [
+            key
+            for key in _keys_read(env.observation_space, task, self.lifter.state_key)
+            if key in goal_keys
+        ]
 
     @property
     def segment(self) -> int:
@@ -399,8 +419,9 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         AttributeError
             If the wrapped env is not a goal env (has no ``compute_reward``).
         ValueError
-            For a goal other than the step's when the task reads the goal (a ``state_key``
-            among the env's ``goal_keys``, default ``("desired_goal",)``): the segment, and so
+            For a goal other than the step's when the task reads the goal (its
+            ``state_entries`` fall in a key among the env's ``goal_keys``, default
+            ``("desired_goal",)``): the segment, and so
             the segment reward, follows the whole path under the goal the episode was run
             with, and relabelling one transition cannot redo that.
         """
