@@ -1480,6 +1480,8 @@ def _plot_experiment(
         width = 0.8 / len(methods)
         for i, label in enumerate(methods):
             these = [r for r in mine if r["label"] == label]
+            if not these:  # a method the panel skips
+                continue
             text = METHOD_LABELS.get(label, label)
             k = list(experiment.methods).index(label)  # a method's colour, also in a subset
             color = f"C{k}"
