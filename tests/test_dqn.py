@@ -266,10 +266,12 @@ def test_prefill_matches_what_the_wrapper_shows(wrapper_kwargs):
     assert buffer.size() == row
 
 
-def test_prefill_lays_demos_out_in_order_for_n_step_returns():
+@pytest.mark.parametrize("handle_timeout_termination", [True, False])
+def test_prefill_lays_demos_out_in_order_for_n_step_returns(handle_timeout_termination):
     """With 3 envs and 3-step returns, each buffer column reads the demos in order, and a
-    column's last row is a demo's end or marked as a truncation: the n-step return of every
-    demo transition equals its return computed from the demo alone."""
+    column's last row is a demo's end or ends an episode as a truncation: the n-step return of
+    every demo transition equals its return computed from the demo alone (also where SB3
+    stores no truncations)."""
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     demos = point_demos(4)
@@ -277,6 +279,7 @@ def test_prefill_lays_demos_out_in_order_for_n_step_returns():
         "MlpPolicy",
         DummyVecEnv([point_env] * 3),
         demonstrations=demos,
+        replay_buffer_kwargs={"handle_timeout_termination": handle_timeout_termination},
         n_steps=3,
         gamma=0.9,
         prefill_replay=True,
@@ -288,6 +291,9 @@ def test_prefill_lays_demos_out_in_order_for_n_step_returns():
     n, rows = len(data["reward"]), buffer.pos
     assert rows == -(-n // 3)
     assert data["done"].sum() == len(demos)
+    for _ in range(2):  # online steps follow in every column: no return may read into them
+        obs = data["obs"][:3]
+        buffer.add(obs, obs, np.zeros((3, 1)), np.full(3, 100.0), np.zeros(3, bool), [{}] * 3)
 
     def n_step(k: int, stop: int) -> tuple[float, float]:
         """Return and bootstrap discount of demo transition k read up to transition stop."""
