@@ -297,6 +297,10 @@ def test_dqn_her_and_bc_run_on_fetch_reach():
     assert her["curve"][-1]["timesteps"] >= 300
     with pytest.raises(ValueError, match=r"reads the goal's offset .* swirl_her needs a task"):
         run_method("swirl_her", preset, demos, seed=0, total_timesteps=300)
+    push = dataclasses.replace(PRESETS["fetchpush"], eval_freq=300, n_eval_episodes=1)
+    pushes = collect_demos(push.env_id, 3, seed=0, state_key=push.state_key, **push.demo_env_kwargs)
+    swirl_her = run_method("swirl_her", push, pushes, seed=0, total_timesteps=300)
+    assert swirl_her["curve"][-1]["timesteps"] >= 300 and swirl_her["n_segments"] >= 1
     bc = run_method("bc_rbf_svm", preset, demos, seed=0, total_timesteps=300)
     assert bc["curve"][-1]["timesteps"] == 0 and 0.0 <= bc["final_success"] <= 1.0
 
