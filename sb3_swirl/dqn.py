@@ -323,7 +323,9 @@ class SwirlDQN(DQN):
                 "gamma": self.gamma,
             }
         with warnings.catch_warnings():
-            if dict_n_step:  # it says n_steps is ignored, which this buffer's kwargs undo
+            # SB3 says n_steps is ignored when the buffer's kwargs carry it (this buffer's, or
+            # SB3's own n-step buffer saved with a model and loaded back)
+            if self.n_steps > 1 and self.replay_buffer_kwargs.get("n_steps") == self.n_steps:
                 warnings.filterwarnings("ignore", message="`n_steps=", category=UserWarning)
             super()._setup_model()
         if self._demo_data is not None and self._demo is None:  # after `load`

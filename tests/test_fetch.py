@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import subprocess
 import sys
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -272,7 +273,10 @@ def test_swirl_dqn_clones_and_prefills_dict_demos_and_saves_them(tmp_path):
     np.testing.assert_array_equal(stored["goal_offset"][0, 0], demos[0].observations[0, -3:])
     assert set(stored) == {*KEYS, "segment"}
     model.save(tmp_path / "model")
-    loaded = SwirlDQN.load(tmp_path / "model", env=env)
+    with warnings.catch_warnings():  # not SB3's "n_steps is ignored": the buffer carries it
+        warnings.filterwarnings("error", message="`n_steps=")
+        loaded = SwirlDQN.load(tmp_path / "model", env=env)
+    assert loaded.replay_buffer.n_steps == 5
     obs, _ = env.reset(seed=0)
     assert loaded.predict(obs, deterministic=True)[0] == model.predict(obs, deterministic=True)[0]
 
