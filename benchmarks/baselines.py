@@ -55,15 +55,15 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from sb3_swirl.baselines import METHODS
+    from sb3_swirl.baselines import GOAL_ENV_METHODS, METHODS
     from sb3_swirl.experiments import method_run
     from sb3_swirl.runner import BACKENDS, run_sweep
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
     parser.add_argument("--seeds", type=int, nargs="+", default=[10, 11, 12, 13, 14])
-    # HER relabels goals: it needs a goal env, and the parking cars are not (reproduce fetch)
-    methods = [m for m in METHODS if not m.endswith("_her")]
+    # the parking cars are not goal envs (HER runs in `sb3-swirl reproduce fetch`)
+    methods = [m for m in METHODS if m not in GOAL_ENV_METHODS]
     parser.add_argument("--methods", nargs="+", default=methods, choices=methods)
     parser.add_argument("--total-timesteps", type=int, default=30_000)
     parser.add_argument("--jobs", type=int, default=2, help="runs at once (local CPUs)")

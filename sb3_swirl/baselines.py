@@ -146,6 +146,8 @@ METHODS: dict[str, str] = {
     "global_irl_model": "the same with the env's known model",
     "gail": "GAIL (imitation, PPO generator; optional extra)",
 }
+#: The methods of :data:`METHODS` that relabel goals (HER): they need a goal env.
+GOAL_ENV_METHODS: tuple[str, ...] = ("dqn_her", "swirl_her")
 
 
 def _needs_actions(method: str, demos: Sequence[Demonstration]) -> None:
