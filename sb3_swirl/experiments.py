@@ -1191,7 +1191,15 @@ EXPERIMENTS: dict[str, Experiment] = {
                 "sb3_swirl/ParallelParkingPartial-v0",
                 250_000,
                 run={"eval_freq": 5_000},
-            )
+            ),
+            # not in the paper: a one-step memory, the regions and rewards unchanged
+            "parking_partial_displacement": Panel(
+                "parking, velocity hidden, last step's displacement seen",
+                "parking",
+                "sb3_swirl/ParallelParkingPartialDisplacement-v0",
+                250_000,
+                run={"eval_freq": 5_000},
+            ),
         },
         _methods("swirl", "swirl_maxent", "dqn", "global_irl", "bc_linear_svm"),
     ),

@@ -22,6 +22,7 @@ from sb3_swirl.envs.parking import (
 IDS = [
     "sb3_swirl/ParallelParking-v0",
     "sb3_swirl/ParallelParkingPartial-v0",
+    "sb3_swirl/ParallelParkingPartialDisplacement-v0",
     "sb3_swirl/ParallelParkingPerturbed-v0",
 ]
 
@@ -195,6 +196,27 @@ def test_partial_observation_hides_speed():
     assert obs.shape == (3,) == env.observation_space.shape
     obs, *_ = env.step(ACCELERATE)
     np.testing.assert_allclose(obs, env.unwrapped.state[:3], rtol=1e-6)
+
+
+def test_displacement_is_the_last_step_of_the_hidden_state():
+    env = gym.make("sb3_swirl/ParallelParkingPartialDisplacement-v0")
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (6,) == env.observation_space.shape
+    np.testing.assert_array_equal(obs[3:], 0.0)
+    before = np.array(env.unwrapped.state[:3])
+    for action in (ACCELERATE, ACCELERATE, STEER_LEFT, DECELERATE):
+        obs, *_ = env.step(action)
+        after = np.array(env.unwrapped.state[:3])
+        np.testing.assert_allclose(obs[:3], after, rtol=1e-6)
+        np.testing.assert_allclose(obs[3:], after - before, atol=1e-6)
+        before = after
+    # the speed is read back from the displacement: v * dt along a straight step
+    quiet = quiet_env(partial_observation=True, observe_displacement=True)
+    np.testing.assert_array_equal(quiet.set_state(0.0, 2.0, 0.0, -0.3)[3:], 0.0)
+    obs, *_ = quiet.step(NOOP)
+    assert obs[3] == pytest.approx(-0.3, abs=1e-6) and obs[4] == pytest.approx(0.0, abs=1e-6)
+    with pytest.raises(ValueError, match="observe_displacement needs partial_observation"):
+        ParallelParkingEnv(observe_displacement=True)
 
 
 def test_start_distribution():

@@ -104,7 +104,12 @@ def test_speed_first_then_heading_hold_without_noise():
 
 
 @pytest.mark.parametrize(
-    "env_id", ["sb3_swirl/ParallelParkingPerturbed-v0", "sb3_swirl/ParallelParkingPartial-v0"]
+    "env_id",
+    [
+        "sb3_swirl/ParallelParkingPerturbed-v0",
+        "sb3_swirl/ParallelParkingPartial-v0",
+        "sb3_swirl/ParallelParkingPartialDisplacement-v0",
+    ],
 )
 def test_variants_park(env_id):
     env = gym.make(env_id)

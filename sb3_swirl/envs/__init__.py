@@ -23,6 +23,13 @@ register(
     max_episode_steps=200,
     kwargs={"partial_observation": True},
 )
+# an ablation of §9.8, not in the paper: the velocity hidden, the last step's displacement seen
+register(
+    id="sb3_swirl/ParallelParkingPartialDisplacement-v0",
+    entry_point="sb3_swirl.envs.parking:ParallelParkingEnv",
+    max_episode_steps=200,
+    kwargs={"partial_observation": True, "observe_displacement": True},
+)
 register(
     id="sb3_swirl/ParallelParkingPerturbed-v0",
     entry_point="sb3_swirl.envs.parking:ParallelParkingEnv",

@@ -95,6 +95,10 @@ class ParallelParkingEnv(gym.Env):
     render_mode : {"rgb_array", "human"}, optional
     partial_observation : bool, default False
         Observe ``(x, y, theta)`` instead of ``(x, y, theta, v)`` (§9.8).
+    observe_displacement : bool, default False
+        With ``partial_observation``: also observe the last step's displacement
+        ``(dx, dy, dtheta)`` (zero after a reset), a one-step memory from which the hidden
+        speed can be read back (not in the paper; an ablation of §9.8).
     perturbed : bool, default False
         Turning right also accelerates the car forward by 0.05 m/s^2 (§9.6).
     dt : float, default 1.0
@@ -146,6 +150,7 @@ class ParallelParkingEnv(gym.Env):
         render_mode: str | None = None,
         *,
         partial_observation: bool = False,
+        observe_displacement: bool = False,
         perturbed: bool = False,
         dt: float = 1.0,
         noise_probability: float = 0.1,
@@ -170,8 +175,14 @@ class ParallelParkingEnv(gym.Env):
                 f"max_speed must be at least one speed unit (0.05 * dt = {0.05 * dt} m/s), "
                 f"got {max_speed}"
             )
+        if observe_displacement and not partial_observation:
+            raise ValueError(
+                "observe_displacement needs partial_observation=True (the full observation "
+                "already holds the speed)"
+            )
         self.render_mode = render_mode
         self.partial_observation = partial_observation
+        self.observe_displacement = observe_displacement
         self.perturbed = perturbed
         self.dt = float(dt)
         self.noise_probability = float(noise_probability)
@@ -186,11 +197,17 @@ class ParallelParkingEnv(gym.Env):
         low = [x0, y0, -math.pi, -high_v]
         high = [x1, y1, math.pi, high_v]
         n = 3 if partial_observation else 4
+        low, high = low[:n], high[:n]
+        if observe_displacement:  # a step moves the centre by at most |v| * dt (arc >= chord)
+            step = high_v * self.dt
+            low += [-step, -step, -math.pi]
+            high += [step, step, math.pi]
         self.observation_space = spaces.Box(
-            np.array(low[:n], dtype=np.float32), np.array(high[:n], dtype=np.float32)
+            np.array(low, dtype=np.float32), np.array(high, dtype=np.float32)
         )
         self.action_space = spaces.Discrete(5)
         self._state: State = (*self.start_center, 0)
+        self._previous: State = self._state
         self._screen: Any = None
         self._clock: Any = None
 
@@ -335,7 +352,7 @@ class ParallelParkingEnv(gym.Env):
         theta = float(theta)
         if not -math.pi <= theta < math.pi:
             theta = (theta + math.pi) % _TWO_PI - math.pi
-        self._state = (float(x), float(y), theta, int(units))
+        self._state = self._previous = (float(x), float(y), theta, int(units))
         return self._obs()
 
     # ------------------------------------------------------------------ gymnasium API
@@ -347,6 +364,7 @@ class ParallelParkingEnv(gym.Env):
         u = self.np_random.uniform(-1.0, 1.0, size=3)
         (cx, cy, ct), (sx, sy, st) = self.start_center, self.start_spread
         self._state = (cx + sx * float(u[0]), cy + sy * float(u[1]), ct + st * float(u[2]), 0)
+        self._previous = self._state
         if self.render_mode == "human":
             self.render()
         return self._obs(), {"is_success": False, "collision": False}
@@ -366,7 +384,7 @@ class ParallelParkingEnv(gym.Env):
             if r < p:
                 noise = self.steering_noise if r < 0.5 * p else -self.steering_noise
         state = self.simulate(self._state, index, noise)
-        self._state = state
+        self._previous, self._state = self._state, state
         collision = self.collides(state)
         success = not collision and self.is_parked(state)
         terminated = collision or success or not self.in_world(state)
@@ -387,6 +405,10 @@ class ParallelParkingEnv(gym.Env):
         # the observation space.
         x = min(max(x, x0), x1)
         y = min(max(y, y0), y1)
+        if self.observe_displacement:
+            px, py, ptheta, _ = self._previous
+            turn = (theta - ptheta + math.pi) % _TWO_PI - math.pi
+            return np.array((x, y, theta, x - px, y - py, turn), dtype=np.float32)
         if self.partial_observation:
             return np.array((x, y, theta), dtype=np.float32)
         return np.array((x, y, theta, units * self.speed_unit), dtype=np.float32)

@@ -38,6 +38,9 @@ from swirl_wrappers._validation import check_int
 SUPERVISORS: dict[str, str] = {
     "sb3_swirl/ParallelParking-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
     "sb3_swirl/ParallelParkingPartial-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
+    "sb3_swirl/ParallelParkingPartialDisplacement-v0": (
+        "sb3_swirl.supervisors.parking:ParkingSupervisor"
+    ),
     "sb3_swirl/ParallelParkingPerturbed-v0": "sb3_swirl.supervisors.parking:ParkingSupervisor",
     "sb3_swirl/NoisyAcrobot-v0": "sb3_swirl.supervisors.acrobot:AcrobotSupervisor",
     "sb3_swirl/UnderactuatedAcrobot-v0": "sb3_swirl.supervisors.acrobot:AcrobotSupervisor",

@@ -190,8 +190,9 @@ class ParkingSupervisor:
         if obs is None:
             return
         obs = np.asarray(obs, dtype=np.float64).ravel()
-        full = self.env.state[: obs.shape[0]]
-        if obs.shape[0] not in (3, 4) or not np.allclose(obs, full, atol=1e-3):
+        # (x, y, theta, v), or (x, y, theta) and perhaps the last displacement (partial)
+        n = 4 if obs.shape[0] == 4 else 3
+        if obs.shape[0] not in (3, 4, 6) or not np.allclose(obs[:n], self.env.state[:n], atol=1e-3):
             raise ValueError(
                 "obs does not match the state of the environment given to ParkingSupervisor; "
                 "pass the env that is being stepped"
