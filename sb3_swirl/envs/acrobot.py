@@ -12,17 +12,11 @@ from gymnasium import spaces
 from gymnasium.envs.classic_control import utils
 from gymnasium.envs.classic_control.acrobot import AcrobotEnv
 
+from sb3_swirl.envs._angles import wrap_angle
 from swirl_wrappers._validation import check_option, check_real
 
 #: gravitational acceleration [m/s^2], the value gymnasium's ``AcrobotEnv._dsdt`` uses
 GRAVITY = 9.8
-
-_TWO_PI = 2.0 * math.pi
-
-
-def _wrap_angle(x: float) -> float:
-    """Wrap an angle into ``[-pi, pi)``."""
-    return (x + math.pi) % _TWO_PI - math.pi
 
 
 class NoisyAcrobotEnv(AcrobotEnv):
@@ -226,8 +220,8 @@ class NoisyAcrobotEnv(AcrobotEnv):
         t1, t2, w1, w2 = self._integrate(*state, tau1, tau2)
         mv1, mv2 = self.MAX_VEL_1, self.MAX_VEL_2
         return (
-            _wrap_angle(t1),
-            _wrap_angle(t2),
+            wrap_angle(t1),
+            wrap_angle(t2),
             min(max(w1, -mv1), mv1),
             min(max(w2, -mv2), mv2),
         )
@@ -279,8 +273,8 @@ class NoisyAcrobotEnv(AcrobotEnv):
         mv1, mv2 = self.MAX_VEL_1, self.MAX_VEL_2
         self.state = np.array(
             (
-                _wrap_angle(float(theta1)),
-                _wrap_angle(float(theta2)),
+                wrap_angle(float(theta1)),
+                wrap_angle(float(theta2)),
                 min(max(float(omega1), -mv1), mv1),
                 min(max(float(omega2), -mv2), mv2),
             )

@@ -23,6 +23,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from sb3_swirl.envs._angles import wrap_angle
 from swirl_wrappers._validation import check_real
 
 #: Action indices of :class:`ParallelParkingEnv` (see its docstring for the table).
@@ -31,8 +32,6 @@ NOOP, ACCELERATE, DECELERATE, STEER_LEFT, STEER_RIGHT = range(5)
 #: A car state ``(x, y, theta, v_units)``: centre (m), heading (rad, in [-pi, pi)) and the
 #: speed as an integer number of speed units (see :attr:`ParallelParkingEnv.speed_unit`).
 State = tuple[float, float, float, int]
-
-_TWO_PI = 2.0 * math.pi
 
 
 class ParallelParkingEnv(gym.Env):
@@ -258,7 +257,7 @@ class ParallelParkingEnv(gym.Env):
                 theta += dist / radius
                 x += radius * (math.sin(theta + beta) - math.sin(start))
                 y -= radius * (math.cos(theta + beta) - math.cos(start))
-                theta = (theta + math.pi) % _TWO_PI - math.pi
+                theta = wrap_angle(theta)
         return (x, y, theta, units)
 
     def noise_free_step(self, observation: np.ndarray, action: int) -> np.ndarray:
@@ -351,7 +350,7 @@ class ParallelParkingEnv(gym.Env):
             )
         theta = float(theta)
         if not -math.pi <= theta < math.pi:
-            theta = (theta + math.pi) % _TWO_PI - math.pi
+            theta = wrap_angle(theta)
         self._state = self._previous = (float(x), float(y), theta, int(units))
         return self._obs()
 
@@ -407,7 +406,7 @@ class ParallelParkingEnv(gym.Env):
         y = min(max(y, y0), y1)
         if self.observe_displacement:
             px, py, ptheta, _ = self._previous
-            turn = (theta - ptheta + math.pi) % _TWO_PI - math.pi
+            turn = wrap_angle(theta - ptheta)
             return np.array((x, y, theta, x - px, y - py, turn), dtype=np.float32)
         if self.partial_observation:
             return np.array((x, y, theta), dtype=np.float32)
