@@ -45,6 +45,7 @@ from sb3_swirl.runner import run_sweep
 from sb3_swirl.segmentation import (
     SegmentationWarning,
     TransitionStateClustering,
+    dynamics_cv_error,
     ruptures_indicator,
     switch_scores,
 )
@@ -80,6 +81,7 @@ __all__ = [
     "check_demos_agree",
     "check_demos_fit_spaces",
     "collect_demos",
+    "dynamics_cv_error",
     "fit_task",
     "get_swirl_attr",
     "load_demos",

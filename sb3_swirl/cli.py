@@ -120,6 +120,15 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         )
     task.to_json(args.output)
     console.print(f"wrote a task with {task.n_segments} segments to {args.output}")
+    scores = task.metadata["indicator_scores"]
+    if len(scores) > 1:
+        tried = ", ".join(
+            f"{name} {'failed' if error is None else f'{error:.4g}'}"
+            for name, error in scores.items()
+        )
+        console.print(
+            f"indicator: {task.metadata['indicator']} (dynamics error, lower is better: {tried})"
+        )
     _print_task(task)
     return 0
 
@@ -243,9 +252,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_seed, default=0)
     p.add_argument(
         "--indicator",
-        default="gmm",
-        help="gmm (default), velocity, linear, ruptures (needs the ruptures package), or "
-        "several joined by '+'",
+        default="auto",
+        help="auto (default: the best of gmm, velocity and linear by how well locally linear "
+        "dynamics explain the demos), gmm (the paper's), velocity, linear, ruptures (needs the "
+        "ruptures package), or several joined by '+'",
     )
     p.add_argument("--window", type=int, default=None, help="window length of the indicator")
     p.add_argument("--min-demo-fraction", type=float, default=None)

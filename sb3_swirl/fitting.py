@@ -139,7 +139,8 @@ def fit_task(
     -------
     TaskModel
         With ``metadata`` recording the estimators and their parameters, ``dims``, the
-        number of demonstrations and their lengths.
+        number of demonstrations and their lengths, the indicator used (``"indicator"``, the
+        one ``"auto"`` chose) and each indicator's :func:`~sb3_swirl.dynamics_cv_error`.
 
     Examples
     --------
@@ -244,6 +245,11 @@ def fit_task(
         "angles": None if angles is None else [list(a) for a in angles],
         "random_state": _jsonable(random_state),
         "segmentation": _record(segmenter),
+        "indicator": _jsonable(segmenter.indicator_),
+        "indicator_scores": {  # None: that indicator's fit failed
+            name: error if np.isfinite(error) else None
+            for name, error in segmenter.indicator_scores_.items()
+        },
         "dropped_regions": segmenter.dropped_regions_,
         "transitions": [t.tolist() for t in segmenter.transitions_],
         "reward": _record(learner),

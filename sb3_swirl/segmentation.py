@@ -10,10 +10,14 @@ Four indicators are provided (§9.5 of the paper compares the first three), seve
 joined (``"gmm+velocity"``: the union of their candidates), and any callable
 ``f(states, random_state) -> list of index arrays`` can be plugged in:
 
-* :func:`gmm_indicator` -- GMM on windows normalised to their first state (the default, §5.3);
+* :func:`gmm_indicator` -- GMM on windows normalised to their first state (the paper's, §5.3);
 * :func:`velocity_indicator` -- a change in the direction of velocity;
 * :func:`linear_indicator` -- a change of local linear dynamic regime;
 * :func:`ruptures_indicator` -- change points of the velocity from the ``ruptures`` library.
+
+The default, ``indicator="auto"``, fits with each of the first three and keeps the
+segmentation under which locally linear dynamics best predict the demonstrations
+(:func:`dynamics_cv_error`, leave one demonstration out).
 
 ``benchmarks/bench_segmentation.py`` measures them against known switch points
 (:func:`switch_scores`) on :func:`sb3_swirl.datasets.make_switching_demos`.
@@ -29,7 +33,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 from scipy.stats import chi2
-from sklearn.base import BaseEstimator
+from sklearn.base import BaseEstimator, clone
 from sklearn.decomposition import PCA
 from sklearn.kernel_approximation import Nystroem
 from sklearn.mixture import BayesianGaussianMixture, GaussianMixture
@@ -428,6 +432,7 @@ def ruptures_indicator(
 
 
 _INDICATORS = ("gmm", "velocity", "linear", "ruptures")
+_AUTO_CANDIDATES = ("gmm", "velocity", "linear")  # the paper's Fig. 6, in order of preference
 _BUILTIN = (gmm_indicator, velocity_indicator, linear_indicator, ruptures_indicator)
 
 
@@ -534,6 +539,69 @@ def _overlaps(a: Region, b: Region) -> bool:
     if _apart_in_time(a, b):
         return False
     return bool(a.contains(b.mean) or b.contains(a.mean))
+
+
+def dynamics_cv_error(
+    states: Sequence[np.ndarray],
+    switches: Sequence[np.ndarray],
+    time_scale: Sequence[float] | None = None,
+    *,
+    ridge: float = 10.0,
+) -> float:
+    """How well a segmentation explains the demonstrations as locally linear dynamics.
+
+    Each segment gets an affine model of the motion, ``s_{t+1} - s_t = W_k [s_t, 1]`` (the
+    locally linear dynamics the paper's §5 assumes), fitted by ridge regression on the steps of
+    that segment in every *other* demonstration; the error is the mean squared prediction error
+    of each demonstration's steps (leave one demonstration out). States are divided by their
+    spread over all demonstrations, and each demonstration's steps by its ``time_scale``.
+    A segmentation that misses a change of dynamics, or cuts in the wrong place, predicts
+    worse; one that cuts too often has less data per segment to predict from.
+    ``TransitionStateClustering(indicator="auto")`` chooses its indicator by it.
+
+    Parameters
+    ----------
+    states : sequence of arrays of shape (T_i + 1, p)
+    switches : sequence of int arrays
+        Per demonstration, the steps at which it enters a new segment (e.g.
+        ``TransitionStateClustering.switches_``).
+    time_scale : sequence of float, optional
+        Per demonstration, old steps per step of a common rate (e.g. ``time_scale_``); ones
+        by default.
+    ridge : float
+        Ridge penalty on the standardised features.
+
+    Returns
+    -------
+    float
+        The mean squared error per step (lower is better).
+    """
+    if time_scale is None:
+        time_scale = np.ones(len(states))
+    scale = _scale(np.concatenate(states))
+    blocks = []  # per demo: features, targets, segment labels
+    gram: dict[int, np.ndarray] = {}
+    cross: dict[int, np.ndarray] = {}
+    for x, sw, r in zip(states, switches, time_scale, strict=True):
+        z = np.asarray(x, dtype=np.float64) / scale
+        targets = np.diff(z, axis=0) / r
+        feats = np.column_stack([z[:-1], np.ones(len(targets))])
+        labels = np.searchsorted(np.sort(sw), np.arange(len(targets)), side="right")
+        mine = {}
+        for k in np.unique(labels):
+            f, t = feats[labels == k], targets[labels == k]
+            mine[int(k)] = (f.T @ f, f.T @ t)
+            gram[int(k)] = gram.get(int(k), 0.0) + mine[int(k)][0]
+            cross[int(k)] = cross.get(int(k), 0.0) + mine[int(k)][1]
+        blocks.append((feats, targets, labels, mine))
+    penalty = ridge * np.eye(states[0].shape[1] + 1)
+    sse = 0.0
+    for feats, targets, labels, mine in blocks:
+        for k, (g, c) in mine.items():
+            w = np.linalg.solve(gram[k] - g + penalty, cross[k] - c)
+            rows = labels == k
+            sse += float(np.sum((feats[rows] @ w - targets[rows]) ** 2))
+    return sse / sum(len(t) for _, t, _, _ in blocks)
 
 
 def switch_scores(
@@ -670,15 +738,20 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
 
     Parameters
     ----------
-    indicator : {"gmm", "velocity", "linear", "ruptures"}, several joined by "+", or callable, \
-default "gmm"
+    indicator : "auto", {"gmm", "velocity", "linear", "ruptures"}, several joined by "+", \
+or callable, default "auto"
         Transition indicator (the README's "Choosing a transition indicator" compares them).
-        ``"ruptures"`` needs the ``ruptures`` package; ``"gmm+velocity"`` takes the union of
-        both indicators' candidates. A callable ``f(states, random_state) -> list of int
-        arrays`` gets the list of task-space state arrays (T_i + 1, p) and an int seed and
-        returns candidate transition steps per demonstration (use ``functools.partial`` of
-        :func:`gmm_indicator`, :func:`velocity_indicator`, :func:`linear_indicator` or
-        :func:`ruptures_indicator` to change their settings).
+        ``"auto"`` fits with each of the paper's three indicators (``"gmm"``, §5.3;
+        ``"velocity"``; ``"linear"``) and keeps the segmentation that best explains the
+        demonstrations as locally linear dynamics (the lowest :func:`dynamics_cv_error`; its
+        warnings only); ``indicator_`` says which and ``indicator_scores_`` gives every
+        score. ``"gmm"`` is the paper's own path. ``"ruptures"`` needs the ``ruptures``
+        package; ``"gmm+velocity"`` takes the union of both indicators' candidates. A
+        callable ``f(states, random_state) -> list of int arrays`` gets the list of
+        task-space state arrays (T_i + 1, p) and an int seed and returns candidate transition
+        steps per demonstration (use ``functools.partial`` of :func:`gmm_indicator`,
+        :func:`velocity_indicator`, :func:`linear_indicator` or :func:`ruptures_indicator` to
+        change their settings).
     window : int, optional
         Window length of the indicators (``--window`` in the CLI). By default 3 for ``"gmm"``
         and ``"velocity"``; ``"linear"`` then uses its own default, ``max(2 (p + 1), 8)``
@@ -767,6 +840,11 @@ default "gmm"
         The candidate regions the fit dropped, each with its median transition ``"time"``,
         ``"centre"``, the ``"reason"`` and the ``"demos"`` concerned (those without a
         transition there, or that do not reach it in order).
+    indicator_ : str or callable
+        The indicator used (with ``"auto"``, the one chosen).
+    indicator_scores_ : dict of str to float
+        :func:`dynamics_cv_error` of each indicator tried (``inf`` where its fit failed;
+        ``"callable"`` for your own).
     feature_map_ : RBFFeatures or None
         The kernel feature map when ``kernel="rbf"``.
     time_scale_ : array of shape (n_demos,)
@@ -808,7 +886,7 @@ default "gmm"
 
     def __init__(
         self,
-        indicator: str | Indicator = "gmm",
+        indicator: str | Indicator = "auto",
         window: int | None = None,
         n_indicator_components: int = 5,
         max_indicator_samples: int = 20_000,
@@ -866,14 +944,62 @@ default "gmm"
         # The work is many small (p x p) factorisations, where BLAS threads only add
         # synchronisation overhead.
         with threadpool_limits(limits=1, user_api="blas"):
-            return self._fit(demos)
+            if self.indicator == "auto":
+                self._fit_auto(demos)
+            else:
+                self._fit(demos)
+                x = [self.transform_states(d.observations) for d in demos]
+                self.indicator_ = self.indicator
+                self.indicator_scores_ = {
+                    self.indicator if isinstance(self.indicator, str) else "callable": (
+                        dynamics_cv_error(x, self.switches_, self.time_scale_)
+                    )
+                }
+        self._warn_lost()
+        return self
+
+    def _fit_auto(self, demos: list) -> TransitionStateClustering:
+        """Fit with each of ``_AUTO_CANDIDATES``; keep the lowest :func:`dynamics_cv_error`."""
+        fits: dict[str, tuple[TransitionStateClustering, list]] = {}
+        scores: dict[str, float] = {}
+        failures: dict[str, str] = {}
+        for name in _AUTO_CANDIDATES:
+            candidate = clone(self).set_params(indicator=name)
+            with warnings.catch_warnings(record=True) as caught:
+                try:
+                    candidate._fit(demos)
+                except ValueError as exc:
+                    failures[name] = str(exc)
+                    scores[name] = math.inf
+                    continue
+            x = [candidate.transform_states(d.observations) for d in demos]
+            scores[name] = dynamics_cv_error(x, candidate.switches_, candidate.time_scale_)
+            fits[name] = (candidate, caught)
+        if not fits:
+            reasons: dict[str, list[str]] = {}
+            for name, why in failures.items():
+                reasons.setdefault(why, []).append(name)
+            raise ValueError(
+                "indicator='auto': no indicator gave a segmentation; "
+                + "; ".join(f"{', '.join(names)}: {why}" for why, names in reasons.items())
+            )
+        best = min(fits, key=scores.__getitem__)  # ties: the first in order of preference
+        chosen, caught = fits[best]
+        for key, value in vars(chosen).items():
+            if key.endswith("_") and not key.startswith("_"):
+                setattr(self, key, value)
+        self.indicator_ = best
+        self.indicator_scores_ = scores
+        for w in caught:  # e.g. a GMM that did not converge: the chosen fit's only
+            warnings.warn(w.message, w.category, stacklevel=3)
+        return self
 
     def _fit(self, demos: list) -> TransitionStateClustering:
         if isinstance(self.indicator, str):
             unknown = [n for n in self.indicator.split("+") if n not in _INDICATORS]
             if unknown:
                 raise InvalidParameterError(
-                    f"The 'indicator' parameter of {type(self).__name__} must be one of "
+                    f"The 'indicator' parameter of {type(self).__name__} must be 'auto', one of "
                     f"{list(_INDICATORS)}, several of them joined by '+' (e.g. "
                     f"'gmm+velocity'), or a callable. Got {self.indicator!r} instead."
                 )
@@ -951,7 +1077,6 @@ default "gmm"
         self._check_complete(self.segments_)
         ends = slice(None, -1) if self.include_goal else slice(None)
         self.switches_ = [b[ends][b[ends] > 0] for b in self.segments_]
-        self._warn_lost()
         return self
 
     def _warn_lost(self) -> None:
@@ -959,9 +1084,18 @@ default "gmm"
         n = self.n_demos_
         n_candidates = sum(len(t) for t in self.transitions_)
         n_transition_regions = len(self.regions_) - (1 if self.include_goal else 0)
+        if self.indicator == "auto":
+            other = (
+                f"try indicator='ruptures' (with the ruptures package; 'auto' tried "
+                f"{', '.join(_AUTO_CANDIDATES)} and kept {self.indicator_})"
+            )
+        else:
+            other = (
+                "try another indicator (indicator='auto' tries gmm, velocity and linear; "
+                "'ruptures' needs the ruptures package)"
+            )
         advice = (
-            "try another indicator (indicator='velocity', 'linear', or 'ruptures' with the "
-            "ruptures package), a longer window, or a lower min_demo_fraction, and look at "
+            f"{other}, a longer window, or a lower min_demo_fraction, and look at "
             "`sb3-swirl show --plot` with the demos"
         )
         # Candidate regions that all but a few demos share: the few are worth a look (a demo

@@ -22,7 +22,10 @@ def test_demos_fit_show_round_trip(tmp_path, capsys):
     assert main(["fit", str(demos_path), "-o", str(task_path), "--seed", "1"]) == 0
     task = TaskModel.from_json(task_path)
     assert task.n_segments >= 2
-    assert f"SWIRL proxy task: {task.n_segments} segments" in capsys.readouterr().out
+    printed = capsys.readouterr()
+    assert f"SWIRL proxy task: {task.n_segments} segments" in printed.out
+    chosen = task.metadata["indicator"]
+    assert chosen in ("gmm", "velocity", "linear") and f"indicator: {chosen} (" in printed.err
 
     figs = tmp_path / "figs"
     assert main(["show", str(task_path), "--plot", str(figs), "--demos", str(demos_path)]) == 0

@@ -9,9 +9,12 @@ import pytest
 from sklearn.decomposition import PCA
 from sklearn.kernel_approximation import Nystroem
 
+from sb3_swirl.datasets import make_switching_demos
 from sb3_swirl.demos import Demonstration, make_piecewise_linear_demos
 from sb3_swirl.segmentation import (
+    SegmentationWarning,
     TransitionStateClustering,
+    dynamics_cv_error,
     gmm_indicator,
     segment_boundaries,
     switch_scores,
@@ -330,3 +333,48 @@ def test_ruptures_and_combined_indicators_recover_the_switch_points(three_phases
         assert scores["f1"] >= 0.9, (indicator, scores)
     with pytest.raises(ValueError, match=r"'indicator' parameter .* joined by '\+'"):
         TransitionStateClustering(indicator="gmm+hmm").fit(demos)
+
+
+def test_dynamics_error_is_lowest_at_the_true_switches():
+    demos, switches = make_switching_demos("linear_dynamics", n_demos=8, random_state=3)
+    states = [d.observations for d in demos]
+    truth = dynamics_cv_error(states, switches)
+    assert truth < dynamics_cv_error(states, [np.zeros(0, np.int64)] * len(states))  # no cut
+    shifted = [s + max(5, len(x) // 10) for s, x in zip(switches, states, strict=True)]
+    assert truth < dynamics_cv_error(states, shifted)
+    # time_scale divides each demo's steps: a demo at half the rate gives the same error
+    halved = [x[::2] for x in states]
+    assert dynamics_cv_error(halved, [s // 2 for s in switches], np.full(8, 2.0)) == pytest.approx(
+        dynamics_cv_error(halved, [s // 2 for s in switches]) / 4
+    )
+
+
+@pytest.mark.parametrize("kind", ["constant_velocity", "goal_reaching"])
+def test_auto_keeps_the_indicator_that_explains_the_dynamics_best(kind):
+    demos, _ = make_switching_demos(kind, n_demos=8, random_state=11)
+    auto = TransitionStateClustering(indicator="auto", random_state=0).fit(demos)
+    scores = auto.indicator_scores_
+    assert list(scores) == ["gmm", "velocity", "linear"]
+    assert auto.indicator_ == min(scores, key=scores.__getitem__)
+    alone = TransitionStateClustering(indicator=auto.indicator_, random_state=0).fit(demos)
+    assert alone.indicator_scores_ == {auto.indicator_: scores[auto.indicator_]}
+    assert len(alone.regions_) == len(auto.regions_)
+    for a, b in zip(alone.regions_, auto.regions_, strict=True):
+        np.testing.assert_array_equal(a.mean, b.mean)
+    for a, b in zip(alone.switches_, auto.switches_, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_auto_warns_once_and_says_what_it_tried():
+    line = np.linspace(0.0, 10.0, 60)[:, None] * np.array([[1.0, 0.5]])
+    rng = np.random.default_rng(0)
+    demos = [line + rng.normal(scale=0.01, size=line.shape) for _ in range(4)]
+    with pytest.warns(SegmentationWarning) as record:
+        tsc = TransitionStateClustering(random_state=0).fit(demos)
+    messages = [str(w.message) for w in record if w.category is SegmentationWarning]
+    assert len(messages) == 1 and "'auto' tried gmm, velocity, linear" in messages[0]
+    assert len(tsc.regions_) == 1
+    # without a goal region nothing is left: the error gives each indicator's reason
+    shifted = [line + 0.1 * i for i in range(4)]
+    with pytest.raises(ValueError, match=r"indicator='auto'.*gmm, velocity, linear: no trans"):
+        TransitionStateClustering(include_goal=False, random_state=0).fit(shifted)
