@@ -65,8 +65,9 @@ def test_defaults_recover_the_switches_of_every_family(kind):
             warnings.simplefilter("ignore")
             tsc = TransitionStateClustering(random_state=0).fit(demos)
         f1.append(switch_scores(tsc.switches_, switches, [len(d) for d in demos])["f1"])
-    # a fit that finds nothing scores 0, one region per demo out of place 0 as well
-    assert statistics.median(f1) >= 0.55, f1
+    # a fit that finds nothing scores 0, one region per demo out of place 0 as well. Measured
+    # with indicator="auto": median 1.0 in every family; the GMM alone: 0.67 on one_dimension
+    assert statistics.median(f1) >= 0.8, f1
 
 
 def _finer(x: np.ndarray, k: int) -> np.ndarray:
@@ -86,7 +87,8 @@ def test_mixed_sampling_rates_give_the_segments_of_the_resampled_set():
                 a = TransitionStateClustering(random_state=0).fit(mixed)
                 b = TransitionStateClustering(random_state=0).fit(resampled)
             same += len(a.regions_) == len(b.regions_)
-    assert same >= 10  # of 12 (measured: 10; without normalize_time: 10 as well, see README)
+    assert same >= 10  # of 12 (measured: 11 with "auto"; the GMM alone: 10, with or without
+    # normalize_time)
 
 
 def test_switch_scores_counts_each_true_switch_once():
