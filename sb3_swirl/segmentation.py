@@ -588,11 +588,11 @@ def dynamics_cv_error(
         feats = np.column_stack([z[:-1], np.ones(len(targets))])
         labels = np.searchsorted(np.sort(sw), np.arange(len(targets)), side="right")
         mine = {}
-        for k in np.unique(labels):
+        for k in np.unique(labels).tolist():
             f, t = feats[labels == k], targets[labels == k]
-            mine[int(k)] = (f.T @ f, f.T @ t)
-            gram[int(k)] = gram.get(int(k), 0.0) + mine[int(k)][0]
-            cross[int(k)] = cross.get(int(k), 0.0) + mine[int(k)][1]
+            mine[k] = (f.T @ f, f.T @ t)
+            gram[k] = gram.get(k, 0.0) + mine[k][0]
+            cross[k] = cross.get(k, 0.0) + mine[k][1]
         blocks.append((feats, targets, labels, mine))
     penalty = ridge * np.eye(states[0].shape[1] + 1)
     sse = 0.0
@@ -948,13 +948,9 @@ or callable, default "auto"
                 self._fit_auto(demos)
             else:
                 self._fit(demos)
-                x = [self.transform_states(d.observations) for d in demos]
                 self.indicator_ = self.indicator
-                self.indicator_scores_ = {
-                    self.indicator if isinstance(self.indicator, str) else "callable": (
-                        dynamics_cv_error(x, self.switches_, self.time_scale_)
-                    )
-                }
+                name = self.indicator if isinstance(self.indicator, str) else "callable"
+                self.indicator_scores_ = {name: self._dynamics_error(demos)}
         self._warn_lost()
         return self
 
@@ -972,8 +968,7 @@ or callable, default "auto"
                     failures[name] = str(exc)
                     scores[name] = math.inf
                     continue
-            x = [candidate.transform_states(d.observations) for d in demos]
-            scores[name] = dynamics_cv_error(x, candidate.switches_, candidate.time_scale_)
+            scores[name] = candidate._dynamics_error(demos)
             fits[name] = (candidate, caught)
         if not fits:
             reasons: dict[str, list[str]] = {}
@@ -993,6 +988,11 @@ or callable, default "auto"
         for w in caught:  # e.g. a GMM that did not converge: the chosen fit's only
             warnings.warn(w.message, w.category, stacklevel=3)
         return self
+
+    def _dynamics_error(self, demos: list) -> float:
+        """:func:`dynamics_cv_error` of the fitted segmentation on its demonstrations."""
+        x = [self.transform_states(d.observations) for d in demos]
+        return dynamics_cv_error(x, self.switches_, self.time_scale_)
 
     def _fit(self, demos: list) -> TransitionStateClustering:
         if isinstance(self.indicator, str):
