@@ -164,9 +164,10 @@ def plot_transitions(
     divided by its spread over all demonstrations) and the change of direction of motion
     (the angle between the mean velocities over the 3 steps before and after each step, the
     velocity indicator's signal), with the candidate transitions the fit's indicator proposed
-    (``task.metadata["transitions"]``, when the task was fitted on these demonstrations) as
-    dots and the steps at which the task's segmentation enters each region as vertical lines.
-    Candidates far from every line were dropped by the clustering or the pruning
+    (``task.metadata["transitions"]``, when the task was fitted on these demonstrations; the
+    legend names the indicator, ``task.metadata["indicator"]``) as dots and the steps at
+    which the task's segmentation enters each region as vertical lines. Candidates far from
+    every line were dropped by the clustering or the pruning
     (``task.metadata["dropped_regions"]`` says why).
 
     Parameters
@@ -187,6 +188,8 @@ def plot_transitions(
     spread = np.concatenate(states).std(axis=0)
     spread[spread == 0] = 1.0
     candidates = task.metadata.get("transitions")
+    indicator = task.metadata.get("indicator")  # the one indicator="auto" chose
+    candidate_label = "candidate" if not isinstance(indicator, str) else f"candidate ({indicator})"
     lengths = task.metadata.get("demo_lengths", {})
     if candidates is not None and (
         len(candidates) != len(demos)
@@ -216,7 +219,7 @@ def plot_transitions(
                 "o",
                 color="tab:red",
                 ms=4,
-                label="candidate",
+                label=candidate_label,
             )
         index = task.segment_indices(demos[k].observations)
         for i in range(1, task.n_indices):
