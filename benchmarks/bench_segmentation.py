@@ -21,11 +21,11 @@ and fit time (the segmentation alone).
 Generator seeds are split: seeds 0-4 (tuning) chose the defaults, seeds 100-104 (held out) are
 the result; ``--split tuning`` shows the former.
 
-Methods: ``default`` (our defaults: ``indicator="auto"``, the best of the next three by
-:func:`~sb3_swirl.segmentation.dynamics_cv_error`; time normalised); ``gmm``, ``velocity``,
-``linear`` (the indicators of the paper's Fig. 6, other settings default; ``gmm`` was the
-default before ``auto``); ``previous`` (the defaults before this benchmark: the GMM indicator,
-region floor ``reg_covar=1e-3``, no time normalisation);
+Methods: ``default`` (our defaults: the GMM indicator, time normalised); ``auto``
+(``indicator="auto"``: the best of gmm, velocity and linear by
+:func:`~sb3_swirl.segmentation.dynamics_cv_error`); ``previous`` (the defaults before this
+benchmark: region floor ``reg_covar=1e-3``, no time normalisation); ``velocity``, ``linear``
+(the other indicators of the paper's Fig. 6, other settings default);
 ``rpt-*``: ruptures (Pelt and Binseg with the l2 cost on velocities, KernelCPD with the RBF
 kernel on velocities) run per demo, then the same cross-demo consensus (clustering, pruning)
 and settings as ours.
@@ -59,8 +59,8 @@ SEEDS = {"tuning": [0, 1, 2, 3, 4], "held-out": [100, 101, 102, 103, 104]}
 VARIANTS = ("base", "dims", "phases", "noisy", "nuisance", "warped", "rates")
 METHODS: dict[str, dict[str, Any]] = {
     "default": {},
-    "gmm": {"indicator": "gmm"},  # the paper's indicator, the default before "auto"
-    "previous": {"indicator": "gmm", "reg_covar": 1e-3, "normalize_time": False},  # before
+    "auto": {"indicator": "auto"},
+    "previous": {"reg_covar": 1e-3, "normalize_time": False},  # the defaults before
     "velocity": {"indicator": "velocity"},
     "linear": {"indicator": "linear"},
     "rpt-pelt": {"indicator": functools.partial(ruptures_indicator, method="pelt")},

@@ -252,10 +252,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_seed, default=0)
     p.add_argument(
         "--indicator",
-        default="auto",
-        help="auto (default: the best of gmm, velocity and linear by how well locally linear "
-        "dynamics explain the demos), gmm (the paper's), velocity, linear, ruptures (needs the "
-        "ruptures package), or several joined by '+'",
+        default="gmm",
+        help="gmm (default, the paper's), auto (the best of gmm, velocity and linear by how "
+        "well locally linear dynamics explain the demos), velocity, linear, ruptures (needs "
+        "the ruptures package), or several joined by '+'",
     )
     p.add_argument("--window", type=int, default=None, help="window length of the indicator")
     p.add_argument("--min-demo-fraction", type=float, default=None)

@@ -10,14 +10,14 @@ Four indicators are provided (§9.5 of the paper compares the first three), seve
 joined (``"gmm+velocity"``: the union of their candidates), and any callable
 ``f(states, random_state) -> list of index arrays`` can be plugged in:
 
-* :func:`gmm_indicator` -- GMM on windows normalised to their first state (the paper's, §5.3);
+* :func:`gmm_indicator` -- GMM on windows normalised to their first state (the default, §5.3);
 * :func:`velocity_indicator` -- a change in the direction of velocity;
 * :func:`linear_indicator` -- a change of local linear dynamic regime;
 * :func:`ruptures_indicator` -- change points of the velocity from the ``ruptures`` library.
 
-The default, ``indicator="auto"``, fits with each of the first three and keeps the
-segmentation under which locally linear dynamics best predict the demonstrations
-(:func:`dynamics_cv_error`, leave one demonstration out).
+``indicator="auto"`` fits with each of the first three and keeps the segmentation under
+which locally linear dynamics best predict the demonstrations (:func:`dynamics_cv_error`,
+leave one demonstration out).
 
 ``benchmarks/bench_segmentation.py`` measures them against known switch points
 (:func:`switch_scores`) on :func:`sb3_swirl.datasets.make_switching_demos`.
@@ -738,14 +738,15 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
 
     Parameters
     ----------
-    indicator : "auto", {"gmm", "velocity", "linear", "ruptures"}, several joined by "+", \
-or callable, default "auto"
+    indicator : {"gmm", "auto", "velocity", "linear", "ruptures"}, several joined by "+", \
+or callable, default "gmm"
         Transition indicator (the README's "Choosing a transition indicator" compares them).
         ``"auto"`` fits with each of the paper's three indicators (``"gmm"``, §5.3;
         ``"velocity"``; ``"linear"``) and keeps the segmentation that best explains the
         demonstrations as locally linear dynamics (the lowest :func:`dynamics_cv_error`; its
-        warnings only); ``indicator_`` says which and ``indicator_scores_`` gives every
-        score. ``"gmm"`` is the paper's own path. ``"ruptures"`` needs the ``ruptures``
+        warnings only; it finds the switch points best, see the README, but was not the
+        best for SwirlDQN on the one env where both were tried); ``indicator_`` says which
+        and ``indicator_scores_`` gives every score. ``"ruptures"`` needs the ``ruptures``
         package; ``"gmm+velocity"`` takes the union of both indicators' candidates. A
         callable ``f(states, random_state) -> list of int arrays`` gets the list of
         task-space state arrays (T_i + 1, p) and an int seed and returns candidate transition
@@ -886,7 +887,7 @@ or callable, default "auto"
 
     def __init__(
         self,
-        indicator: str | Indicator = "auto",
+        indicator: str | Indicator = "gmm",
         window: int | None = None,
         n_indicator_components: int = 5,
         max_indicator_samples: int = 20_000,

@@ -22,10 +22,8 @@ def test_demos_fit_show_round_trip(tmp_path, capsys):
     assert main(["fit", str(demos_path), "-o", str(task_path), "--seed", "1"]) == 0
     task = TaskModel.from_json(task_path)
     assert task.n_segments >= 2
-    printed = capsys.readouterr()
-    assert f"SWIRL proxy task: {task.n_segments} segments" in printed.out
-    chosen = task.metadata["indicator"]
-    assert chosen in ("gmm", "velocity", "linear") and f"indicator: {chosen} (" in printed.err
+    assert f"SWIRL proxy task: {task.n_segments} segments" in capsys.readouterr().out
+    assert task.metadata["indicator"] == "gmm"
 
     figs = tmp_path / "figs"
     assert main(["show", str(task_path), "--plot", str(figs), "--demos", str(demos_path)]) == 0
@@ -234,6 +232,19 @@ def test_ctrl_c_in_the_middle_of_a_real_run(tmp_path):
     assert proc.wait(timeout=30) == 130
     assert rest.strip() == "interrupted"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_fit_auto_prints_which_indicator_it_kept(tmp_path, capsys):
+    from sb3_swirl.demos import make_piecewise_linear_demos, save_demos
+
+    path, task_path = tmp_path / "demos.npz", tmp_path / "task.json"
+    save_demos(make_piecewise_linear_demos(n_demos=6, random_state=0)[0], path)
+    assert main(["fit", str(path), "-o", str(task_path), "--indicator", "auto"]) == 0
+    task = TaskModel.from_json(task_path)
+    chosen, scores = task.metadata["indicator"], task.metadata["indicator_scores"]
+    assert list(scores) == ["gmm", "velocity", "linear"]
+    assert chosen == min(scores, key=scores.__getitem__)
+    assert f"indicator: {chosen} (dynamics error" in capsys.readouterr().err
 
 
 def test_fit_reports_a_demo_at_another_rate_as_one_warning_line(tmp_path, capsys):

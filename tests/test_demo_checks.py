@@ -100,9 +100,7 @@ def test_the_fit_says_which_regions_it_dropped_and_which_demos_lack_them(parking
         pytest.warns(SegmentationWarning, match=r"Dropped 3 .*none from demos \[4\]") as record,
     ):
         # step by step, the coarse demo hides every transition the others share
-        task = fit_task(
-            coarse, indicator="gmm", reg_covar=0.1, normalize_time=False, random_state=0
-        )
+        task = fit_task(coarse, reg_covar=0.1, normalize_time=False, random_state=0)
     message = next(str(w.message) for w in record if w.category is SegmentationWarning)
     assert message.startswith("No transition region: the indicator proposed")
     assert "one segment to the goal" in message and task.n_segments == 1

@@ -370,11 +370,11 @@ def test_auto_warns_once_and_says_what_it_tried():
     rng = np.random.default_rng(0)
     demos = [line + rng.normal(scale=0.01, size=line.shape) for _ in range(4)]
     with pytest.warns(SegmentationWarning) as record:
-        tsc = TransitionStateClustering(random_state=0).fit(demos)
+        tsc = TransitionStateClustering(indicator="auto", random_state=0).fit(demos)
     messages = [str(w.message) for w in record if w.category is SegmentationWarning]
     assert len(messages) == 1 and "'auto' tried gmm, velocity, linear" in messages[0]
     assert len(tsc.regions_) == 1
     # without a goal region nothing is left: the error gives each indicator's reason
     shifted = [line + 0.1 * i for i in range(4)]
     with pytest.raises(ValueError, match=r"indicator='auto'.*gmm, velocity, linear: no trans"):
-        TransitionStateClustering(include_goal=False, random_state=0).fit(shifted)
+        TransitionStateClustering(indicator="auto", include_goal=False, random_state=0).fit(shifted)
