@@ -70,7 +70,7 @@ def test_plot_transitions_marks_candidates_and_region_entries(fitted, tmp_path):
     first = panels[0]
     dots = [ln for ln in first.get_lines() if ln.get_marker() == "o"]
     assert len(dots[0].get_xdata()) == len(task.metadata["transitions"][0])
-    assert dots[0].get_label() == f"candidate ({task.metadata['indicator']})"  # auto's choice
+    assert dots[0].get_label() == f"candidate ({task.metadata['indicator']})"  # the indicator used
     entries = [ln for ln in first.get_lines() if ln.get_label().startswith("enters region")]
     steps = task.segment_indices(demos[0].observations)
     assert [ln.get_xdata()[0] for ln in entries] == [

@@ -342,7 +342,8 @@ def test_dynamics_error_is_lowest_at_the_true_switches():
     assert truth < dynamics_cv_error(states, [np.zeros(0, np.int64)] * len(states))  # no cut
     shifted = [s + max(5, len(x) // 10) for s, x in zip(switches, states, strict=True)]
     assert truth < dynamics_cv_error(states, shifted)
-    # time_scale divides each demo's steps: a demo at half the rate gives the same error
+    # time_scale divides each demo's steps (the targets; ridge is linear in them): the error
+    # falls by its square
     halved = [x[::2] for x in states]
     assert dynamics_cv_error(halved, [s // 2 for s in switches], np.full(8, 2.0)) == pytest.approx(
         dynamics_cv_error(halved, [s // 2 for s in switches]) / 4
