@@ -743,11 +743,12 @@ or callable, default "gmm"
         Transition indicator (the README's "Choosing a transition indicator" compares them).
         ``"auto"`` fits with each of the paper's three indicators (``"gmm"``, §5.3;
         ``"velocity"``; ``"linear"``) and keeps the segmentation that best explains the
-        demonstrations as locally linear dynamics (the lowest :func:`dynamics_cv_error`; its
-        warnings only; it finds the switch points best, see the README, but was not the
-        best for SwirlDQN on the one env where both were tried); ``indicator_`` says which
-        and ``indicator_scores_`` gives every score. ``"ruptures"`` needs the ``ruptures``
-        package; ``"gmm+velocity"`` takes the union of both indicators' candidates. A
+        demonstrations as locally linear dynamics (the lowest :func:`dynamics_cv_error`);
+        only the kept fit's warnings are shown, ``indicator_`` says which it kept and
+        ``indicator_scores_`` gives every score. It finds switch points best (README), but
+        SwirlDQN did worse with it on the one env where both were tried. ``"ruptures"``
+        needs the ``ruptures`` package; ``"gmm+velocity"`` takes the union of both
+        indicators' candidates. A
         callable ``f(states, random_state) -> list of int arrays`` gets the list of
         task-space state arrays (T_i + 1, p) and an int seed and returns candidate transition
         steps per demonstration (use ``functools.partial`` of :func:`gmm_indicator`,
