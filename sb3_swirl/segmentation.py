@@ -748,12 +748,11 @@ or callable, default "gmm"
         ``indicator_scores_`` gives every score. It finds switch points best (README), but
         SwirlDQN did worse with it on the one env where both were tried. ``"ruptures"``
         needs the ``ruptures`` package; ``"gmm+velocity"`` takes the union of both
-        indicators' candidates. A
-        callable ``f(states, random_state) -> list of int arrays`` gets the list of
-        task-space state arrays (T_i + 1, p) and an int seed and returns candidate transition
-        steps per demonstration (use ``functools.partial`` of :func:`gmm_indicator`,
-        :func:`velocity_indicator`, :func:`linear_indicator` or :func:`ruptures_indicator` to
-        change their settings).
+        indicators' candidates. A callable ``f(states, random_state) -> list of int arrays``
+        gets the list of task-space state arrays (T_i + 1, p) and an int seed and returns
+        candidate transition steps per demonstration (use ``functools.partial`` of
+        :func:`gmm_indicator`, :func:`velocity_indicator`, :func:`linear_indicator` or
+        :func:`ruptures_indicator` to change their settings).
     window : int, optional
         Window length of the indicators (``--window`` in the CLI). By default 3 for ``"gmm"``
         and ``"velocity"``; ``"linear"`` then uses its own default, ``max(2 (p + 1), 8)``
