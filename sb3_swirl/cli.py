@@ -107,6 +107,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         segmentation["min_demo_fraction"] = args.min_demo_fraction
     if args.reg_covar is not None:
         segmentation["reg_covar"] = args.reg_covar
+    if args.no_merge_fragments:
+        segmentation["merge_fragments"] = False
     reward = {"metric": args.metric}
     with console.status(f"fitting SWIRL on {len(demos)} demos...") as status:
         task = fit_task(
@@ -265,6 +267,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="floor of each region's covariance, relative to each axis's variance "
         "(few demos: raise it; parking with 5 demos: 0.1)",
+    )
+    p.add_argument(
+        "--no-merge-fragments",
+        action="store_true",
+        help="prune state clusters that hold only some demos as the paper's Algorithm 1 does, "
+        "without first merging those that share no demo and overlap in time",
     )
     p.add_argument("--metric", default="mahalanobis", choices=["mahalanobis", "euclidean"])
     p.add_argument(

@@ -541,6 +541,51 @@ def _overlaps(a: Region, b: Region) -> bool:
     return bool(a.contains(b.mean) or b.contains(a.mean))
 
 
+def _merge_fragments(
+    fragments: list[tuple[np.ndarray, np.ndarray]],
+    owner: np.ndarray,
+    times: np.ndarray,
+    window: int,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Merge state clusters that share no demonstration and overlap in time.
+
+    One transition that every demonstration makes once, with states spread along dimensions
+    the phases do not depend on (nuisance dimensions), is cut by the state DP-GMM into
+    fragments, each holding the transitions of some of the demonstrations, none of them
+    enough to survive pruning. Two fragments are one transition when no demonstration has a
+    transition in both and their (time-normalised) transition times overlap, each range
+    widened by ``window`` steps. The closest such pair by median time is merged, until none
+    is left.
+
+    Parameters
+    ----------
+    fragments : list of (members, score)
+        Indices into the pooled candidate transitions, and each member's responsibility.
+    owner, times : arrays over the pooled candidate transitions
+        The demonstration of each and its normalised time.
+    window : int
+        Slack on each time range, in steps.
+    """
+    groups = list(fragments)
+    while True:
+        best = None
+        for i, (a, _) in enumerate(groups):
+            for j in range(i + 1, len(groups)):
+                b = groups[j][0]
+                if np.intersect1d(owner[a], owner[b]).size:
+                    continue
+                low = max(times[a].min(), times[b].min()) - window
+                high = min(times[a].max(), times[b].max()) + window
+                gap = abs(float(np.median(times[a]) - np.median(times[b])))
+                if low <= high and (best is None or gap < best[0]):
+                    best = (gap, i, j)
+        if best is None:
+            return groups
+        _, i, j = best
+        merged = tuple(np.concatenate(parts) for parts in zip(groups[i], groups[j], strict=True))
+        groups = [g for k, g in enumerate(groups) if k not in (i, j)] + [merged]
+
+
 def dynamics_cv_error(
     states: Sequence[np.ndarray],
     switches: Sequence[np.ndarray],
@@ -713,9 +758,11 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
        holds enough demonstrations (a place visited more than once), since otherwise
        demonstrators' differing speeds would fragment one transition.
     4. Clusters holding transitions from fewer than ``ceil(min_demo_fraction * n_demos)``
-       demonstrations are pruned. From each survivor one representative transition per
-       demonstration is kept (the most probable member), which discards stray indicator
-       noise merged into the cluster.
+       demonstrations are pruned, after (``merge_fragments``) merging those that share no
+       demonstration and overlap in time: one transition spread along dimensions the phases
+       do not depend on is cut into such fragments. From each survivor one representative
+       transition per demonstration is kept (the most probable member), which discards stray
+       indicator noise merged into the cluster.
     5. Each survivor becomes a :class:`swirl_wrappers.Region`: the mean and regularised
        covariance of its representative states and the chi-square quantile of ``confidence``
        (raised where needed so that the region holds every state it was built from).
@@ -779,6 +826,12 @@ or callable, default "gmm"
     min_demo_fraction : float, default 1.0
         A cluster survives when it holds transitions from at least
         ``ceil(min_demo_fraction * n_demos)`` demonstrations (1.0: all, as in Algorithm 1).
+    merge_fragments : bool, default True
+        Before pruning, merge state clusters that hold no demonstration in common and whose
+        transition times overlap (within ``window`` steps, time-normalised): the DP-GMM cuts
+        one transition whose states spread along nuisance dimensions (motion unrelated to
+        the phases) into such fragments, each too small to survive. ``False`` prunes them as
+        Algorithm 1 does. Chosen by ``benchmarks/bench_segmentation.py`` (README).
     confidence : float, default 0.95
         Chi-square confidence level of the region ellipsoids (before shrinking for
         disjointness).
@@ -876,6 +929,7 @@ or callable, default "gmm"
         "n_regions_max": [_COUNT],
         "concentration": [_POSITIVE],
         "min_demo_fraction": [Interval(Real, 0, 1, closed="right")],
+        "merge_fragments": ["boolean"],
         "confidence": [Interval(Real, 0, 1, closed="neither")],
         "covariance_type": [StrOptions({"diag", "tied", "spherical", "full"})],
         "reg_covar": [_POSITIVE],
@@ -898,6 +952,7 @@ or callable, default "gmm"
         n_regions_max: int = 10,
         concentration: float = 0.1,
         min_demo_fraction: float = 1.0,
+        merge_fragments: bool = True,
         confidence: float = 0.95,
         covariance_type: str = "diag",
         reg_covar: float = 1e-4,
@@ -917,6 +972,7 @@ or callable, default "gmm"
         self.n_regions_max = n_regions_max
         self.concentration = concentration
         self.min_demo_fraction = min_demo_fraction
+        self.merge_fragments = merge_fragments
         self.confidence = confidence
         self.covariance_type = covariance_type
         self.reg_covar = reg_covar
@@ -1341,7 +1397,8 @@ or callable, default "gmm"
         time within each state cluster. A state cluster is split by time only when every time
         sub-cluster survives pruning on its own (a place all demonstrations visit more than
         once); otherwise demonstrators' differing speeds would fragment one transition into
-        sub-clusters each holding part of the demonstrations.
+        sub-clusters each holding part of the demonstrations. With ``merge_fragments``, state
+        clusters too small to survive are first merged by :func:`_merge_fragments`.
 
         Returns (times, states, [(demo, step), ...]) of one representative transition per
         demonstration (its most probable member) for every surviving cluster, ordered by
@@ -1357,9 +1414,16 @@ or callable, default "gmm"
         need = self._min_demos(len(x))
         rs = check_random_state(seed)
         state_labels, state_proba = self._dpgmm_labels(points, rs.randint(_SEED_MAX))
-        found = []
+        clusters, fragments = [], []
         for c in np.unique(state_labels):
             members = np.flatnonzero(state_labels == c)
+            part = (members, state_proba[members, c])
+            (clusters if len(np.unique(owner[members])) >= need else fragments).append(part)
+        if self.merge_fragments:
+            times = steps * self.time_scale_[owner]
+            fragments = _merge_fragments(fragments, owner, times, self._window)
+        found = []
+        for members, score in fragments:
             here = np.unique(owner[members])
             if len(here) < need:
                 without = sorted(set(range(len(x))) - set(here.tolist()))
@@ -1370,8 +1434,10 @@ or callable, default "gmm"
                     f"needed; none from demos {without})",
                     without,
                 )
-                continue
-            groups = [(members, state_proba[members, c])]
+            else:  # merged fragments: one transition, not split by time again
+                found.append(self._representatives(members, score, owner, steps, points))
+        for members, score in clusters:
+            groups = [(members, score)]
             if len(members) > 1:
                 time_labels, time_proba = self._dpgmm_labels(
                     (steps[members] * self.time_scale_[owner[members]])[:, None],
@@ -1383,21 +1449,30 @@ or callable, default "gmm"
                 ]
                 if len(sub) > 1 and all(len(np.unique(owner[m])) >= need for m, _ in sub):
                     groups = sub
-            for group, score in groups:
-                reps = []
-                for demo in np.unique(owner[group]):
-                    mine = owner[group] == demo
-                    reps.append(int(group[mine][np.argmax(score[mine])]))
-                reps = np.asarray(reps)
-                found.append(
-                    (
-                        steps[reps].astype(np.float64),
-                        points[reps],
-                        [(int(owner[r]), int(steps[r])) for r in reps],
-                    )
-                )
+            for group, group_score in groups:
+                found.append(self._representatives(group, group_score, owner, steps, points))
         found.sort(key=lambda item: float(np.median(item[0])))
         return found
+
+    @staticmethod
+    def _representatives(
+        group: np.ndarray,
+        score: np.ndarray,
+        owner: np.ndarray,
+        steps: np.ndarray,
+        points: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]:
+        """(times, states, [(demo, step), ...]) of each demonstration's most probable member."""
+        reps = []
+        for demo in np.unique(owner[group]):
+            mine = owner[group] == demo
+            reps.append(int(group[mine][np.argmax(score[mine])]))
+        reps = np.asarray(reps)
+        return (
+            steps[reps].astype(np.float64),
+            points[reps],
+            [(int(owner[r]), int(steps[r])) for r in reps],
+        )
 
     def _region(
         self, points: np.ndarray, reg: np.ndarray, threshold: float, times: np.ndarray

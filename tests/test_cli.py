@@ -59,6 +59,28 @@ def test_fit_reg_covar_reaches_the_regions(tmp_path):
     assert np.linalg.det(from_cli.regions[0].covariance) > np.linalg.det(thin.regions[0].covariance)
 
 
+def test_fit_no_merge_fragments_prunes_as_the_paper(tmp_path, capsys):
+    from sb3_swirl.datasets import make_switching_demos
+    from sb3_swirl.demos import save_demos
+
+    # 3 dims that move on their own split the first transition (see test_segmentation.py)
+    demos, _ = make_switching_demos(
+        "constant_velocity", n_demos=8, dim=3, nuisance_dims=3, random_state=8
+    )
+    path = tmp_path / "demos.npz"
+    save_demos(demos, path)
+    segments = {}
+    for flag in ([], ["--no-merge-fragments"]):
+        task_path = tmp_path / f"task{len(flag)}.json"
+        assert main(["fit", str(path), "-o", str(task_path), *flag]) == 0
+        task = TaskModel.from_json(task_path)
+        assert task.metadata["segmentation"]["params"]["merge_fragments"] is not bool(flag)
+        segments[bool(flag)] = task.n_segments
+        said = capsys.readouterr().err
+        assert ("No transition region" in said) is bool(flag)
+    assert segments == {False: 2, True: 1}
+
+
 def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
     assert main(["fit", str(tmp_path / "missing.npz"), "-o", str(tmp_path / "t.json")]) == 2
     assert "missing.npz" in capsys.readouterr().err
