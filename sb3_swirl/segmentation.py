@@ -1151,8 +1151,9 @@ or callable, default "gmm"
                 "try another indicator (indicator='auto' tries gmm, velocity and linear; "
                 "'ruptures' needs the ruptures package)"
             )
+        merge = "" if self.merge_fragments else ", merge_fragments=True"
         advice = (
-            f"{other}, a longer window, or a lower min_demo_fraction, and look at "
+            f"{other}, a longer window{merge}, or a lower min_demo_fraction, and look at "
             "`sb3-swirl show --plot` with the demos"
         )
         # Candidate regions that all but a few demos share: the few are worth a look (a demo

@@ -78,6 +78,7 @@ def test_fit_no_merge_fragments_prunes_as_the_paper(tmp_path, capsys):
         segments[bool(flag)] = task.n_segments
         said = capsys.readouterr().err
         assert ("No transition region" in said) is bool(flag)
+        assert ("merge_fragments=True" in said) is bool(flag)  # the advice names it
     assert segments == {False: 2, True: 1}
 
 
