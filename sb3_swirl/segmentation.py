@@ -1420,8 +1420,8 @@ or callable, default "gmm"
             members = np.flatnonzero(state_labels == c)
             part = (members, state_proba[members, c])
             (clusters if len(np.unique(owner[members])) >= need else fragments).append(part)
+        times = steps * self.time_scale_[owner]  # time-normalised
         if self.merge_fragments:
-            times = steps * self.time_scale_[owner]
             fragments = _merge_fragments(fragments, owner, times, self._window)
         found = []
         for members, score in fragments:
@@ -1441,8 +1441,7 @@ or callable, default "gmm"
             groups = [(members, score)]
             if len(members) > 1:
                 time_labels, time_proba = self._dpgmm_labels(
-                    (steps[members] * self.time_scale_[owner[members]])[:, None],
-                    rs.randint(_SEED_MAX),
+                    times[members][:, None], rs.randint(_SEED_MAX)
                 )
                 sub = [
                     (members[time_labels == u], time_proba[time_labels == u, u])
