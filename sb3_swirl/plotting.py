@@ -306,7 +306,7 @@ def plot_cut_paths(
     episode is reset with ``seed + i``. Successful cuts are drawn solid, failed ones dashed.
     """
     base = env.unwrapped
-    fig = _new_figure((6, 4.5))
+    fig = _new_figure((7, 3.5))
     ax = fig.add_subplot()
     colors = _colors(n_episodes)
     line = None
@@ -335,7 +335,8 @@ def plot_cut_paths(
     ax.set_xlabel("x (cm)")
     ax.set_ylabel("y (cm)")
     ax.set_title("tool paths (greedy policy); errors: position / tracking")
-    ax.legend(loc="best", fontsize=8)
+    # below the plot: the paths fill the wide, flat axes, so a legend inside hides them
+    fig.legend(loc="outside lower center", fontsize=8, ncol=2)
     ax.grid(alpha=0.3)
     return _finish(fig, path)
 
