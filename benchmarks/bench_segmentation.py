@@ -21,11 +21,13 @@ and fit time (the segmentation alone).
 Generator seeds are split: seeds 0-4 (tuning) chose the defaults, seeds 100-104 (held out) are
 the result; ``--split tuning`` shows the former.
 
-Methods: ``default`` (our defaults: the GMM indicator, time normalised, fragments merged);
-``unmerged`` (the same without ``merge_fragments``); ``auto`` (``indicator="auto"``: the best
-of gmm, velocity and linear by :func:`~sb3_swirl.segmentation.dynamics_cv_error`);
-``previous`` (the defaults before this benchmark: region floor ``reg_covar=1e-3``, no time
-normalisation, no merging); ``velocity``, ``linear`` (the other indicators of the paper's
+Methods: ``default`` (our defaults: the GMM indicator, time normalised, fragments merged,
+nuisance dimensions left out where they cut transitions); ``all-dims`` (the same without
+``ignore_nuisance_dims``); ``unmerged`` (the same without ``merge_fragments``); ``auto``
+(``indicator="auto"``: the best of gmm, velocity and linear by
+:func:`~sb3_swirl.segmentation.dynamics_cv_error`); ``previous`` (the defaults before this
+benchmark: region floor ``reg_covar=1e-3``, no time normalisation, no merging, every
+dimension clustered); ``velocity``, ``linear`` (the other indicators of the paper's
 Fig. 6, other settings default);
 ``rpt-*``: ruptures (Pelt and Binseg with the l2 cost on velocities, KernelCPD with the RBF
 kernel on velocities) run per demo, then the same cross-demo consensus (clustering, pruning)
@@ -61,8 +63,14 @@ VARIANTS = ("base", "dims", "phases", "noisy", "nuisance", "warped", "rates")
 METHODS: dict[str, dict[str, Any]] = {
     "default": {},
     "auto": {"indicator": "auto"},
-    "unmerged": {"merge_fragments": False},  # the defaults before fragments were merged
-    "previous": {"reg_covar": 1e-3, "normalize_time": False, "merge_fragments": False},
+    "all-dims": {"ignore_nuisance_dims": False},  # the defaults before nuisance dims
+    "unmerged": {"merge_fragments": False},
+    "previous": {
+        "reg_covar": 1e-3,
+        "normalize_time": False,
+        "merge_fragments": False,
+        "ignore_nuisance_dims": False,
+    },
     "velocity": {"indicator": "velocity"},
     "linear": {"indicator": "linear"},
     "rpt-pelt": {"indicator": functools.partial(ruptures_indicator, method="pelt")},

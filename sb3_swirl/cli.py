@@ -109,6 +109,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         segmentation["reg_covar"] = args.reg_covar
     if args.no_merge_fragments:
         segmentation["merge_fragments"] = False
+    if args.cluster_all_dims:
+        segmentation["ignore_nuisance_dims"] = False
     reward = {"metric": args.metric}
     with console.status(f"fitting SWIRL on {len(demos)} demos...") as status:
         task = fit_task(
@@ -130,6 +132,14 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         )
         console.print(
             f"indicator: {task.metadata['indicator']} (dynamics error, lower is better: {tried})"
+        )
+    kept = task.metadata["cluster_dims"]
+    if kept is not None:
+        ignored = sorted(set(range(task.regions[0].mean.size)) - set(kept))
+        console.print(
+            f"transition states clustered without task-space dims {ignored}: they move on "
+            "their own in each demo and cut transitions into fragments (--cluster-all-dims "
+            "to use them)"
         )
     _print_task(task)
     return 0
@@ -273,6 +283,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="prune state clusters that hold only some demos as the paper's Algorithm 1 does, "
         "without first merging those that share no demo and overlap in time",
+    )
+    p.add_argument(
+        "--cluster-all-dims",
+        action="store_true",
+        help="cluster transition states on every dimension, also those that move on their "
+        "own in each demo (by default left out where they cut transitions into fragments)",
     )
     p.add_argument("--metric", default="mahalanobis", choices=["mahalanobis", "euclidean"])
     p.add_argument(

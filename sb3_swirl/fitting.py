@@ -251,6 +251,9 @@ def fit_task(
             for name, error in segmenter.indicator_scores_.items()
         },
         "dropped_regions": segmenter.dropped_regions_,
+        "cluster_dims": None
+        if segmenter.cluster_dims_ is None
+        else segmenter.cluster_dims_.tolist(),
         "transitions": [t.tolist() for t in segmenter.transitions_],
         "reward": _record(learner),
     }

@@ -84,6 +84,38 @@ def _merge_close(idx: np.ndarray, radius: int) -> np.ndarray:
     return np.asarray(keep, dtype=np.int64)
 
 
+def _shared_course_dims(
+    states: list[np.ndarray], n_points: int = 50, low: float = 0.3, high: float = 0.8
+) -> np.ndarray | None:
+    """The dimensions to cluster transitions on, leaving out those that move on their own.
+
+    Each demonstration is resampled to ``n_points`` states evenly spaced over its length. Per
+    dimension, the share of its variance explained by the mean resampled demonstration (an
+    R^2) says how much the demonstrations move alike along it. A dimension that moves on its
+    own in each demonstration (a nuisance dimension) has R^2 below ``low`` *and* no stretch
+    where the demonstrations agree: its spread across demonstrations stays above 10 % of its
+    variance at 90 % of the resampled steps (a relative offset that every demonstration
+    brings to zero, as a gripper reaching its object does, is kept). Returns the other
+    indices when some dimension has R^2 >= ``high`` and some are nuisance; otherwise
+    ``None`` (e.g. oscillations whose timing differs between demonstrations align along no
+    dimension, so none is called a nuisance).
+    """
+    grid = [np.linspace(0, len(s) - 1, n_points) for s in states]
+    resampled = np.stack(
+        [
+            np.column_stack([np.interp(g, np.arange(len(s)), col) for col in s.T])
+            for g, s in zip(grid, states, strict=True)
+        ]
+    )  # (n_demos, n_points, p)
+    total = np.maximum(resampled.reshape(-1, resampled.shape[2]).var(axis=0), 1e-300)
+    spread = resampled.var(axis=0)  # across demonstrations, per resampled step
+    r2 = 1.0 - spread.mean(axis=0) / total
+    nuisance = (r2 < low) & (np.quantile(spread, 0.1, axis=0) > 0.1 * total)
+    if r2.max() < high or not nuisance.any():
+        return None
+    return np.flatnonzero(~nuisance)
+
+
 def _time_scales(states: list[np.ndarray]) -> np.ndarray:
     """Each demonstration's typical step over the median of all demonstrations' (1 if 0).
 
@@ -760,9 +792,11 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
     4. Clusters holding transitions from fewer than ``ceil(min_demo_fraction * n_demos)``
        demonstrations are pruned, after (``merge_fragments``) merging those that share no
        demonstration and overlap in time: one transition spread along dimensions the phases
-       do not depend on is cut into such fragments. From each survivor one representative
-       transition per demonstration is kept (the most probable member), which discards stray
-       indicator noise merged into the cluster.
+       do not depend on is cut into such fragments. If some are still too small and
+       (``ignore_nuisance_dims``) some dimensions move on their own in each demonstration,
+       steps 3 and 4 run again on the other dimensions only (``cluster_dims_``). From each
+       survivor one representative transition per demonstration is kept (the most probable
+       member), which discards stray indicator noise merged into the cluster.
     5. Each survivor becomes a :class:`swirl_wrappers.Region`: the mean and regularised
        covariance of its representative states and the chi-square quantile of ``confidence``
        (raised where needed so that the region holds every state it was built from).
@@ -832,6 +866,18 @@ or callable, default "gmm"
         one transition whose states spread along nuisance dimensions (motion unrelated to
         the phases) into such fragments, each too small to survive. ``False`` prunes them as
         Algorithm 1 does. Chosen by ``benchmarks/bench_segmentation.py`` (README).
+    ignore_nuisance_dims : bool, default True
+        When clustering leaves transitions too few demonstrations share (step 4), cluster
+        the transition states again without the dimensions that move on their own in each
+        demonstration: those along which the mean of the demonstrations, each resampled to a
+        common length, explains under 30 % of the variance (while another dimension's
+        explains 80 % or more) and the demonstrations agree nowhere (their spread stays
+        above 10 % of the variance at 90 % of the steps). Such dimensions scatter one
+        transition's states, and the clustering cuts it into fragments. Where no dimension
+        follows a shared course (e.g. oscillations whose timing differs between
+        demonstrations) nothing is ignored. Regions still span every dimension.
+        ``indicator="auto"`` also scores its candidates without those dimensions. Chosen by
+        ``benchmarks/bench_segmentation.py`` (README).
     confidence : float, default 0.95
         Chi-square confidence level of the region ellipsoids (before shrinking for
         disjointness).
@@ -901,6 +947,9 @@ or callable, default "gmm"
         ``"callable"`` for your own).
     feature_map_ : RBFFeatures or None
         The kernel feature map when ``kernel="rbf"``.
+    cluster_dims_ : int array or None
+        The task-space dimensions the transition states were clustered on when
+        ``ignore_nuisance_dims`` left some out; ``None`` when all were used.
     time_scale_ : array of shape (n_demos,)
         Each demonstration's resampling factor (its typical step over the median; all ones
         without ``normalize_time`` or with a callable indicator).
@@ -930,6 +979,7 @@ or callable, default "gmm"
         "concentration": [_POSITIVE],
         "min_demo_fraction": [Interval(Real, 0, 1, closed="right")],
         "merge_fragments": ["boolean"],
+        "ignore_nuisance_dims": ["boolean"],
         "confidence": [Interval(Real, 0, 1, closed="neither")],
         "covariance_type": [StrOptions({"diag", "tied", "spherical", "full"})],
         "reg_covar": [_POSITIVE],
@@ -953,6 +1003,7 @@ or callable, default "gmm"
         concentration: float = 0.1,
         min_demo_fraction: float = 1.0,
         merge_fragments: bool = True,
+        ignore_nuisance_dims: bool = True,
         confidence: float = 0.95,
         covariance_type: str = "diag",
         reg_covar: float = 1e-4,
@@ -973,6 +1024,7 @@ or callable, default "gmm"
         self.concentration = concentration
         self.min_demo_fraction = min_demo_fraction
         self.merge_fragments = merge_fragments
+        self.ignore_nuisance_dims = ignore_nuisance_dims
         self.confidence = confidence
         self.covariance_type = covariance_type
         self.reg_covar = reg_covar
@@ -1049,6 +1101,9 @@ or callable, default "gmm"
     def _dynamics_error(self, demos: list) -> float:
         """:func:`dynamics_cv_error` of the fitted segmentation on its demonstrations."""
         x = [self.transform_states(d.observations) for d in demos]
+        shared = _shared_course_dims(x) if self.ignore_nuisance_dims else None
+        if shared is not None:  # motion no demo shares is no segmentation's to explain
+            x = [s[:, shared] for s in x]
         return dynamics_cv_error(x, self.switches_, self.time_scale_)
 
     def _fit(self, demos: list) -> TransitionStateClustering:
@@ -1097,6 +1152,7 @@ or callable, default "gmm"
         reg = self.reg_covar * np.diag(_scale(pooled) ** 2)
         threshold = float(chi2.ppf(self.confidence, df=pooled.shape[1]))
         self.dropped_regions_: list[dict[str, Any]] = []
+        self.cluster_dims_: np.ndarray | None = None
         candidates = self._cluster(x, int(seeds[2]))
         regions = [self._region(points, reg, threshold, times) for times, points, _ in candidates]
         members = [reps for _, _, reps in candidates]
@@ -1399,7 +1455,9 @@ or callable, default "gmm"
         sub-cluster survives pruning on its own (a place all demonstrations visit more than
         once); otherwise demonstrators' differing speeds would fragment one transition into
         sub-clusters each holding part of the demonstrations. With ``merge_fragments``, state
-        clusters too small to survive are first merged by :func:`_merge_fragments`.
+        clusters too small to survive are first merged by :func:`_merge_fragments`. With
+        ``ignore_nuisance_dims``, if some are still too small, the state clustering runs
+        again on :func:`_shared_course_dims` (same seed).
 
         Returns (times, states, [(demo, step), ...]) of one representative transition per
         demonstration (its most probable member) for every surviving cluster, ordered by
@@ -1414,15 +1472,26 @@ or callable, default "gmm"
         points = np.concatenate([s[t] for s, t in zip(x, self.transitions_, strict=True)])
         need = self._min_demos(len(x))
         rs = check_random_state(seed)
-        state_labels, state_proba = self._dpgmm_labels(points, rs.randint(_SEED_MAX))
-        clusters, fragments = [], []
-        for c in np.unique(state_labels):
-            members = np.flatnonzero(state_labels == c)
-            part = (members, state_proba[members, c])
-            (clusters if len(np.unique(owner[members])) >= need else fragments).append(part)
         times = steps * self.time_scale_[owner]  # time-normalised
-        if self.merge_fragments:
-            fragments = _merge_fragments(fragments, owner, times, self._window)
+        state_seed = rs.randint(_SEED_MAX)
+
+        def state_clusters(feats: np.ndarray) -> tuple[list, list]:
+            labels, proba = self._dpgmm_labels(feats, state_seed)
+            clusters, fragments = [], []
+            for c in np.unique(labels):
+                members = np.flatnonzero(labels == c)
+                part = (members, proba[members, c])
+                (clusters if len(np.unique(owner[members])) >= need else fragments).append(part)
+            if self.merge_fragments:
+                fragments = _merge_fragments(fragments, owner, times, self._window)
+            return clusters, fragments
+
+        clusters, fragments = state_clusters(points)
+        if self.ignore_nuisance_dims and any(len(np.unique(owner[m])) < need for m, _ in fragments):
+            shared = _shared_course_dims(x)
+            if shared is not None:  # cluster again without the dims no demo shares
+                self.cluster_dims_ = shared
+                clusters, fragments = state_clusters(points[:, shared])
         found = []
         for members, score in fragments:
             here = np.unique(owner[members])

@@ -59,27 +59,31 @@ def test_fit_reg_covar_reaches_the_regions(tmp_path):
     assert np.linalg.det(from_cli.regions[0].covariance) > np.linalg.det(thin.regions[0].covariance)
 
 
-def test_fit_no_merge_fragments_prunes_as_the_paper(tmp_path, capsys):
+def test_fit_flags_turn_off_nuisance_dims_and_merging(tmp_path, capsys):
     from sb3_swirl.datasets import make_switching_demos
     from sb3_swirl.demos import save_demos
 
-    # 3 dims that move on their own split the first transition (see test_segmentation.py)
+    # 3 dims that move on their own split the transitions (see test_segmentation.py)
     demos, _ = make_switching_demos(
         "constant_velocity", n_demos=8, dim=3, nuisance_dims=3, random_state=8
     )
     path = tmp_path / "demos.npz"
     save_demos(demos, path)
     segments = {}
-    for flag in ([], ["--no-merge-fragments"]):
-        task_path = tmp_path / f"task{len(flag)}.json"
-        assert main(["fit", str(path), "-o", str(task_path), *flag]) == 0
+    for flags in ((), ("--cluster-all-dims",), ("--cluster-all-dims", "--no-merge-fragments")):
+        task_path = tmp_path / f"task{len(flags)}.json"
+        assert main(["fit", str(path), "-o", str(task_path), *flags]) == 0
         task = TaskModel.from_json(task_path)
-        assert task.metadata["segmentation"]["params"]["merge_fragments"] is not bool(flag)
-        segments[bool(flag)] = task.n_segments
+        params = task.metadata["segmentation"]["params"]
+        assert params["ignore_nuisance_dims"] is not bool(flags)
+        assert params["merge_fragments"] is (len(flags) < 2)
+        segments[flags] = task.n_segments
         said = capsys.readouterr().err
-        assert ("No transition region" in said) is bool(flag)
-        assert ("merge_fragments=True" in said) is bool(flag)  # the advice names it
-    assert segments == {False: 2, True: 1}
+        assert ("without task-space dims [3, 4, 5]" in said) is not bool(flags)
+        assert ("No transition region" in said) is (len(flags) == 2)
+        assert ("merge_fragments=True" in said) is (len(flags) == 2)  # the advice names it
+    # the three phases; merging alone finds the first switch; as the paper, none
+    assert list(segments.values()) == [3, 2, 1]
 
 
 def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
