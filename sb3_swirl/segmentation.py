@@ -794,7 +794,8 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
        demonstration and overlap in time: one transition spread along dimensions the phases
        do not depend on is cut into such fragments. If some are still too small and
        (``ignore_nuisance_dims``) some dimensions move on their own in each demonstration,
-       steps 3 and 4 run again on the other dimensions only (``cluster_dims_``). From each
+       steps 3 to 6 run again with the state clustering on the other dimensions only, and
+       that fit is kept if it keeps more regions (``cluster_dims_``). From each
        survivor one representative transition per demonstration is kept (the most probable
        member), which discards stray indicator noise merged into the cluster.
     5. Each survivor becomes a :class:`swirl_wrappers.Region`: the mean and regularised
@@ -876,7 +877,8 @@ or callable, default "gmm"
         transition's states, and the clustering cuts it into fragments. Where no dimension
         follows a shared course (e.g. oscillations whose timing differs between
         demonstrations) nothing is ignored. Regions still span every dimension.
-        ``indicator="auto"`` also scores its candidates without those dimensions. Chosen by
+        That second fit is kept only if it ends with more regions. ``indicator="auto"`` also
+        scores its candidates without those dimensions. Chosen by
         ``benchmarks/bench_segmentation.py`` (README).
     confidence : float, default 0.95
         Chi-square confidence level of the region ellipsoids (before shrinking for
@@ -1151,9 +1153,61 @@ or callable, default "gmm"
         pooled = np.concatenate(x)
         reg = self.reg_covar * np.diag(_scale(pooled) ** 2)
         threshold = float(chi2.ppf(self.confidence, df=pooled.shape[1]))
-        self.dropped_regions_: list[dict[str, Any]] = []
         self.cluster_dims_: np.ndarray | None = None
-        candidates = self._cluster(x, int(seeds[2]))
+        regions, members, kept, fragmented = self._kept_regions(x, reg, threshold, int(seeds[2]))
+        shared = _shared_course_dims(x) if self.ignore_nuisance_dims and fragmented else None
+        if shared is not None:  # cluster again without the dims no demo shares
+            dropped = self.dropped_regions_
+            again = self._kept_regions(x, reg, threshold, int(seeds[2]), shared)
+            better = len(again[2]) > len(kept)
+            if len(again[2]) == len(kept) and kept:
+                on_shared = [s[:, shared] for s in x]
+                errors = [
+                    dynamics_cv_error(on_shared, self._switches(x, r, k), self.time_scale_)
+                    for r, k in ((regions, kept), (again[0], again[2]))
+                ]
+                better = errors[1] < errors[0]
+            if better:
+                regions, members, kept, _ = again
+                self.cluster_dims_ = shared
+            else:
+                self.dropped_regions_ = dropped
+        if not kept:
+            raise ValueError(
+                f"no transition region is shared by at least "
+                f"{self._min_demos(len(states))} of the {len(states)} demonstrations; "
+                "lower min_demo_fraction, change the indicator or window, or set "
+                "include_goal=True"
+            )
+        self.regions_ = _make_disjoint([regions[i] for i in kept])
+        self.region_transitions_ = [members[i] for i in kept]
+        task = _regions_task(self.regions_)
+        self.segments_ = [_reach_steps(task, s) for s in x]
+        self._check_complete(self.segments_)
+        ends = slice(None, -1) if self.include_goal else slice(None)
+        self.switches_ = [b[ends][b[ends] > 0] for b in self.segments_]
+        return self
+
+    def _switches(self, x: list[np.ndarray], regions: list[Region], kept: list[int]) -> list:
+        task = _regions_task(_make_disjoint([regions[i] for i in kept]))
+        ends = slice(None, -1) if self.include_goal else slice(None)
+        return [b[ends][b[ends] > 0] for b in (_reach_steps(task, s) for s in x)]
+
+    def _kept_regions(
+        self,
+        x: list[np.ndarray],
+        reg: np.ndarray,
+        threshold: float,
+        seed: int,
+        dims: np.ndarray | None = None,
+    ) -> tuple[list[Region], list, list[int], bool]:
+        """Steps 3-6 on the candidate transitions (the state clustering on ``dims`` if given).
+
+        Returns the regions, their representative transitions, the indices of those kept and
+        whether the clustering dropped fragments; fills ``dropped_regions_`` afresh.
+        """
+        self.dropped_regions_: list[dict[str, Any]] = []
+        candidates, fragmented = self._cluster(x, seed, dims)
         regions = [self._region(points, reg, threshold, times) for times, points, _ in candidates]
         members = [reps for _, _, reps in candidates]
         times = [t for t, _, _ in candidates]
@@ -1176,21 +1230,7 @@ or callable, default "gmm"
             else:
                 kept.append(i)
         kept = self._prune_unreached(x, [regions[i] for i in kept], kept, times)
-        if not kept:
-            raise ValueError(
-                f"no transition region is shared by at least "
-                f"{self._min_demos(len(states))} of the {len(states)} demonstrations; "
-                "lower min_demo_fraction, change the indicator or window, or set "
-                "include_goal=True"
-            )
-        self.regions_ = _make_disjoint([regions[i] for i in kept])
-        self.region_transitions_ = [members[i] for i in kept]
-        task = _regions_task(self.regions_)
-        self.segments_ = [_reach_steps(task, s) for s in x]
-        self._check_complete(self.segments_)
-        ends = slice(None, -1) if self.include_goal else slice(None)
-        self.switches_ = [b[ends][b[ends] > 0] for b in self.segments_]
-        return self
+        return regions, members, kept, fragmented
 
     def _warn_lost(self) -> None:
         """Warn when the fit found candidates but kept almost none of their structure."""
@@ -1446,8 +1486,8 @@ or callable, default "gmm"
         return proba.argmax(axis=1), proba
 
     def _cluster(
-        self, x: list[np.ndarray], seed: int
-    ) -> list[tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]]:
+        self, x: list[np.ndarray], seed: int, dims: np.ndarray | None = None
+    ) -> tuple[list[tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]], bool]:
         """DP-GMM over the candidate transition states, then over time, then pruning.
 
         As in the authors' TSC code, transition states are clustered first in state, then in
@@ -1456,46 +1496,37 @@ or callable, default "gmm"
         once); otherwise demonstrators' differing speeds would fragment one transition into
         sub-clusters each holding part of the demonstrations. With ``merge_fragments``, state
         clusters too small to survive are first merged by :func:`_merge_fragments`. With
-        ``ignore_nuisance_dims``, if some are still too small, the state clustering runs
-        again on :func:`_shared_course_dims` (same seed).
+        ``dims``, the state clustering uses those dimensions only.
 
         Returns (times, states, [(demo, step), ...]) of one representative transition per
         demonstration (its most probable member) for every surviving cluster, ordered by
-        median time.
+        median time; and whether clusters too small to survive were dropped.
         """
         owner = np.concatenate(
             [np.full(len(t), i, dtype=np.int64) for i, t in enumerate(self.transitions_)]
         )
         steps = np.concatenate(self.transitions_).astype(np.int64)
         if len(steps) < 2:
-            return []
+            return [], False
         points = np.concatenate([s[t] for s, t in zip(x, self.transitions_, strict=True)])
         need = self._min_demos(len(x))
         rs = check_random_state(seed)
+        state_labels, state_proba = self._dpgmm_labels(
+            points if dims is None else points[:, dims], rs.randint(_SEED_MAX)
+        )
+        clusters, fragments = [], []
+        for c in np.unique(state_labels):
+            members = np.flatnonzero(state_labels == c)
+            part = (members, state_proba[members, c])
+            (clusters if len(np.unique(owner[members])) >= need else fragments).append(part)
         times = steps * self.time_scale_[owner]  # time-normalised
-        state_seed = rs.randint(_SEED_MAX)
-
-        def state_clusters(feats: np.ndarray) -> tuple[list, list]:
-            labels, proba = self._dpgmm_labels(feats, state_seed)
-            clusters, fragments = [], []
-            for c in np.unique(labels):
-                members = np.flatnonzero(labels == c)
-                part = (members, proba[members, c])
-                (clusters if len(np.unique(owner[members])) >= need else fragments).append(part)
-            if self.merge_fragments:
-                fragments = _merge_fragments(fragments, owner, times, self._window)
-            return clusters, fragments
-
-        clusters, fragments = state_clusters(points)
-        if self.ignore_nuisance_dims and any(len(np.unique(owner[m])) < need for m, _ in fragments):
-            shared = _shared_course_dims(x)
-            if shared is not None:  # cluster again without the dims no demo shares
-                self.cluster_dims_ = shared
-                clusters, fragments = state_clusters(points[:, shared])
-        found = []
+        if self.merge_fragments:
+            fragments = _merge_fragments(fragments, owner, times, self._window)
+        found, fragmented = [], False
         for members, score in fragments:
             here = np.unique(owner[members])
             if len(here) < need:
+                fragmented = True
                 without = sorted(set(range(len(x))) - set(here.tolist()))
                 self._drop(
                     steps[members],
@@ -1521,7 +1552,7 @@ or callable, default "gmm"
             for group, group_score in groups:
                 found.append(self._representatives(group, group_score, owner, steps, points))
         found.sort(key=lambda item: float(np.median(item[0])))
-        return found
+        return found, fragmented
 
     @staticmethod
     def _representatives(
