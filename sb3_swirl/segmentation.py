@@ -1163,7 +1163,11 @@ or callable, default "gmm"
             if len(again[2]) == len(kept) and kept:
                 on_shared = [s[:, shared] for s in x]
                 errors = [
-                    dynamics_cv_error(on_shared, self._switches(x, r, k), self.time_scale_)
+                    dynamics_cv_error(
+                        on_shared,
+                        self._segmentation(x, _make_disjoint([r[i] for i in k]))[1],
+                        self.time_scale_,
+                    )
                     for r, k in ((regions, kept), (again[0], again[2]))
                 ]
                 better = errors[1] < errors[0]
@@ -1181,17 +1185,18 @@ or callable, default "gmm"
             )
         self.regions_ = _make_disjoint([regions[i] for i in kept])
         self.region_transitions_ = [members[i] for i in kept]
-        task = _regions_task(self.regions_)
-        self.segments_ = [_reach_steps(task, s) for s in x]
+        self.segments_, self.switches_ = self._segmentation(x, self.regions_)
         self._check_complete(self.segments_)
-        ends = slice(None, -1) if self.include_goal else slice(None)
-        self.switches_ = [b[ends][b[ends] > 0] for b in self.segments_]
         return self
 
-    def _switches(self, x: list[np.ndarray], regions: list[Region], kept: list[int]) -> list:
-        task = _regions_task(_make_disjoint([regions[i] for i in kept]))
+    def _segmentation(
+        self, x: list[np.ndarray], regions: list[Region]
+    ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Per demonstration, the step each region is reached at, and the switches."""
+        task = _regions_task(regions)
+        segments = [_reach_steps(task, s) for s in x]
         ends = slice(None, -1) if self.include_goal else slice(None)
-        return [b[ends][b[ends] > 0] for b in (_reach_steps(task, s) for s in x)]
+        return segments, [b[ends][b[ends] > 0] for b in segments]
 
     def _kept_regions(
         self,
