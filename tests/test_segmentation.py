@@ -404,54 +404,52 @@ def test_fragments_sharing_no_demo_and_overlapping_in_time_are_merged():
     assert len(_merge_fragments(apart, owner, times, window=3)) == 2
 
 
-def test_merging_fragments_keeps_transitions_that_nuisance_dimensions_split():
-    # 3-D phases plus 3 dimensions moving on their own: the state DP-GMM cuts a transition
-    # into fragments along the nuisance dimensions, each with too few demos to survive
-    found = {False: [], True: []}
-    for kind in ("constant_velocity", "linear_dynamics", "one_dimension"):
+def _nuisance_sets(kinds):
+    """8 demos of 3-D phases plus 3 dims moving on their own, seeds 7-9 of each kind."""
+    for kind in kinds:
         for seed in (7, 8, 9):
-            demos, switches = make_switching_demos(
-                kind, n_demos=8, dim=3, nuisance_dims=3, random_state=seed
+            yield make_switching_demos(kind, n_demos=8, dim=3, nuisance_dims=3, random_state=seed)
+
+
+def _fit_and_score(demos, switches, **params):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SegmentationWarning)
+        tsc = TransitionStateClustering(random_state=0, **params).fit(demos)
+    return tsc, switch_scores(tsc.switches_, switches, [len(d) for d in demos])["f1"]
+
+
+def test_merging_fragments_keeps_transitions_that_nuisance_dimensions_split():
+    # the state DP-GMM cuts a transition into fragments along the nuisance dimensions, each
+    # with too few demos to survive
+    found = {False: [], True: []}
+    for demos, switches in _nuisance_sets(
+        ("constant_velocity", "linear_dynamics", "one_dimension")
+    ):
+        for merge in (False, True):
+            tsc, f1 = _fit_and_score(
+                demos, switches, merge_fragments=merge, ignore_nuisance_dims=False
             )
-            for merge in (False, True):
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", SegmentationWarning)
-                    tsc = TransitionStateClustering(
-                        merge_fragments=merge, ignore_nuisance_dims=False, random_state=0
-                    )
-                    tsc.fit(demos)
-                f1 = switch_scores(tsc.switches_, switches, [len(d) for d in demos])["f1"]
-                found[merge].append((len(tsc.regions_), f1))
+            found[merge].append((len(tsc.regions_), f1))
     # measured: 3 of 9 sets with a transition region and mean F1 0.07 without, 6 and 0.27 with
     assert sum(n > 1 for n, _ in found[True]) >= sum(n > 1 for n, _ in found[False]) + 2
     assert np.mean([f for _, f in found[True]]) > np.mean([f for _, f in found[False]]) + 0.1
 
 
 def test_nuisance_dims_are_left_out_of_clustering_where_they_fragment_transitions():
-    # 3-D phases plus 3 dims moving on their own: merging alone recovers few transitions
+    # merging alone recovers few transitions on these sets
     f1 = {False: [], True: []}
     n_regions = {False: [], True: []}
     used = []
-    for kind in KINDS:
-        for seed in (7, 8, 9):
-            demos, switches = make_switching_demos(
-                kind, n_demos=8, dim=3, nuisance_dims=3, random_state=seed
-            )
-            for ignore in (False, True):
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", SegmentationWarning)
-                    tsc = TransitionStateClustering(
-                        ignore_nuisance_dims=ignore, random_state=0
-                    ).fit(demos)
-                f1[ignore].append(
-                    switch_scores(tsc.switches_, switches, [len(d) for d in demos])["f1"]
-                )
-                n_regions[ignore].append(len(tsc.regions_))
-            used.append(tsc.cluster_dims_)
-            if tsc.cluster_dims_ is None:  # the fit clustering every dim was kept
-                assert n_regions[True][-1] == n_regions[False][-1]
-            # regions still span every dimension, nuisance ones included
-            assert tsc.regions_[0].mean.shape == (6,)
+    for demos, switches in _nuisance_sets(KINDS):
+        for ignore in (False, True):
+            tsc, score = _fit_and_score(demos, switches, ignore_nuisance_dims=ignore)
+            f1[ignore].append(score)
+            n_regions[ignore].append(len(tsc.regions_))
+        used.append(tsc.cluster_dims_)
+        if tsc.cluster_dims_ is None:  # the fit clustering every dim was kept
+            assert n_regions[True][-1] == n_regions[False][-1]
+        # regions still span every dimension, nuisance ones included
+        assert tsc.regions_[0].mean.shape == (6,)
     # measured: mean F1 0.26 clustering every dim, 0.75 without the nuisance dims; the
     # nuisance dims were left out in 10 of 12 sets, never a task dim
     assert np.mean(f1[True]) > np.mean(f1[False]) + 0.3
