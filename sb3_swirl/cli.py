@@ -133,7 +133,12 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         console.print(
             f"indicator: {task.metadata['indicator']} (dynamics error, lower is better: {tried})"
         )
-    kept = task.metadata["cluster_dims"]
+    _print_task(task)
+    return 0
+
+
+def _print_task(task) -> None:
+    kept = task.metadata.get("cluster_dims")  # absent from tasks fitted before it existed
     if kept is not None:
         ignored = sorted(set(range(task.regions[0].mean.size)) - set(kept))
         console.print(
@@ -141,11 +146,6 @@ def _cmd_fit(args: argparse.Namespace) -> int:
             "their own in each demo and cut transitions into fragments (--cluster-all-dims "
             "to use them)"
         )
-    _print_task(task)
-    return 0
-
-
-def _print_task(task) -> None:
     table = Table(
         title=f"SWIRL proxy task: {task.n_segments} segments",
         caption="segment i leads to region i; its reward is -(x - centre)ᵀ Ψ (x - centre)",

@@ -84,6 +84,8 @@ def test_fit_flags_turn_off_nuisance_dims_and_merging(tmp_path, capsys):
         assert ("merge_fragments=True" in said) is (len(flags) == 2)  # the advice names it
     # the three phases; merging alone finds the first switch; as the paper, none
     assert list(segments.values()) == [3, 2, 1]
+    assert main(["show", str(tmp_path / "task0.json")]) == 0  # the saved task says it too
+    assert "without task-space dims [3, 4, 5]" in capsys.readouterr().err
 
 
 def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
