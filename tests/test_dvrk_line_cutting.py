@@ -167,6 +167,22 @@ def _success_rate(model, env, seeds) -> float:
     return float(np.mean([greedy_infos(model, env, seed)[-1]["is_success"] for seed in seeds]))
 
 
+def test_entry_fit_makes_the_last_segment_the_cut():
+    """The zoo entry's fit puts a region at the line's start, so the last segment is the cut
+    and its reward weighs the distance to the line most (paper §10.2). On these demos (seed 7)
+    the GMM alone put it 0.7 cm before the start, where the reward weighed y more than d."""
+    from sb3_swirl.experiments import PRESETS
+    from sb3_swirl.fitting import fit_task
+
+    preset = PRESETS["linecutting"]
+    demos = collect_demos(ENV_ID, preset.n_demos, seed=7, **preset.demo_env_kwargs)
+    task = fit_task(demos, random_state=7, **preset.fit_kwargs)
+    start = task.regions[-2].mean  # the region before the goal
+    assert abs(start[0] - -2.0) < 0.3 and start[2] < 0.3, start
+    weight = np.diag(task.rewards[-1].weight)
+    assert np.argmax(weight) == 2 and weight[2] > 10 * weight[1], weight
+
+
 def test_swirl_pipeline_learns_to_position_and_cut():
     """Straight-line demos -> two segments (position, cut) -> SwirlDQN (BC start, then 2000
     steps of Q-learning) cuts lines that its untrained network does not."""
