@@ -88,6 +88,14 @@ class SwirlDQN(DQN):
         in order, so that SB3's n-step returns (``n_steps > 1``) read them as DQfD does. With
         ``HerReplayBuffer`` (``copy_info_dict=True``) each demo is an episode whose goals are
         relabelled as the agent's own are.
+    pretrain_td_steps : int
+        DQfD's pre-training (Hester et al., 2018): after BC, this many updates of the TD loss
+        (plus the demo loss) on the prefilled demo transitions alone, the target network copied
+        every ``target_update_interval`` of them, so that online learning starts from Q-values
+        at the scale of the demos' returns rather than near 0. Where the reward is a cost paid
+        at every step, Q-values near 0 are optimistic: each action the agent tries falls below
+        the ones it has not tried, and the greedy policy drifts off the clone. Needs
+        ``prefill_replay``.
     infer_actions : {"inverse_dynamics", "none"}
         For demos without actions: label them with an :class:`InverseDynamics` model trained on
         ``inverse_dynamics_steps`` random-action steps in the env (which also go into the
@@ -144,6 +152,7 @@ class SwirlDQN(DQN):
         demo_loss_coef: float = 1.0,
         double_q: bool = False,
         prefill_replay: bool = False,
+        pretrain_td_steps: int = 0,
         infer_actions: Literal["inverse_dynamics", "none"] = "inverse_dynamics",
         inverse_dynamics_steps: int = 2000,
         inverse_dynamics_kwargs: dict[str, Any] | None = None,
@@ -157,6 +166,12 @@ class SwirlDQN(DQN):
         self.demo_loss_coef = check_real("demo_loss_coef", demo_loss_coef, low=0.0)
         self.double_q = check_bool("double_q", double_q)
         self.prefill_replay = check_bool("prefill_replay", prefill_replay)
+        self.pretrain_td_steps = check_int("pretrain_td_steps", pretrain_td_steps, low=0)
+        if self.pretrain_td_steps and not self.prefill_replay:
+            raise ValueError(
+                "pretrain_td_steps trains on the demo transitions in the replay buffer: "
+                "set prefill_replay=True as well"
+            )
         self.infer_actions = check_option(
             "infer_actions", infer_actions, ("inverse_dynamics", "none")
         )
@@ -557,7 +572,23 @@ class SwirlDQN(DQN):
         info = self._behaviour_clone()
         if self.prefill_replay:
             self._prefill(data)
+        if self.pretrain_td_steps:
+            self._pretrain_td()
         return info
+
+    def _pretrain_td(self) -> None:
+        """DQfD's pre-training: Q-learning updates on the prefilled demo transitions alone."""
+        if not hasattr(self, "_logger"):  # `pretrain` called by hand, before `learn`
+            from stable_baselines3.common.logger import Logger
+
+            self._logger = Logger(folder=None, output_formats=[])
+        left = self.pretrain_td_steps
+        while left > 0:
+            steps = min(left, self.target_update_interval)
+            self.train(steps, self.batch_size)
+            self.q_net_target.load_state_dict(self.q_net.state_dict())
+            left -= steps
+        self.policy.set_training_mode(False)
 
     def _demo_tensors(self, data: dict[str, np.ndarray]) -> dict[str, th.Tensor]:
         # every segment weighs the same, so short segments are not drowned out by long ones

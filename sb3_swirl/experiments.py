@@ -632,7 +632,12 @@ def reproduce_table1(
             "swirl_no_bc": (
                 "swirl_dqn",
                 None,
-                {"prefill_replay": False, "demo_loss_coef": 0.0, "exploration_initial_eps": 1.0},
+                {
+                    "prefill_replay": False,
+                    "pretrain_td_steps": 0,
+                    "demo_loss_coef": 0.0,
+                    "exploration_initial_eps": 1.0,
+                },
             ),
         }
         for name, (algo, algo_demos, overrides) in learners.items():

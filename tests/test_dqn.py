@@ -172,6 +172,8 @@ def test_a_batch_larger_than_the_demo_pairs_is_all_of_them():
         (dict(bc_batch_size="64"), "bc_batch_size must be an integer"),
         (dict(task="task.json"), "task must be a swirl_wrappers.TaskModel, got str"),
         (dict(double_q=1), "double_q"),
+        (dict(pretrain_td_steps=100), "set prefill_replay=True"),
+        (dict(pretrain_td_steps=-1, prefill_replay=True), "pretrain_td_steps"),
         (
             dict(prefill_replay=True, optimize_memory_usage=True, replay_buffer_kwargs={}),
             "optimize_memory_usage",
@@ -316,6 +318,36 @@ def test_prefill_lays_demos_out_in_order_for_n_step_returns(handle_timeout_termi
             placements = [n_step(k, k + rows - j % rows) for j in (k, k + n) if j < 3 * rows]
             got = (samples.rewards[row, 0].item(), samples.discounts[row, 0].item())
             assert any(got == pytest.approx(p, abs=1e-5) for p in placements)
+
+
+def test_pretrain_td_steps_start_q_at_the_demos_returns_and_keep_the_clone():
+    """DQfD's pre-training moves Q(s, a_E) from about 0 towards the demos' discounted returns
+    (here a cost at every step: the quadratic segment reward) without losing the clone."""
+    demos = point_demos(3)
+    errors = {}
+    for steps in (0, 4000):
+        model = SwirlDQN(
+            "MlpPolicy",
+            point_env(),
+            demonstrations=demos,
+            prefill_replay=steps > 0,
+            pretrain_td_steps=steps,
+            target_update_interval=250,
+            gamma=0.9,
+            bc_epochs=100,
+            seed=0,
+        )
+        model.pretrain()
+        data = model._demo_data
+        q = q_values(model, data["obs"])
+        returns, future = np.zeros(len(data["reward"])), 0.0
+        for k in range(len(returns) - 1, -1, -1):
+            future = data["reward"][k] + 0.9 * (0.0 if data["done"][k] else future)
+            returns[k] = future
+        assert returns.max() <= 0.0 and returns.mean() < -1.0  # a cost at every step
+        assert np.mean(q.argmax(axis=1) == data["actions"]) > 0.95
+        errors[steps] = np.abs(q[np.arange(len(q)), data["actions"]] - returns).mean()
+    assert errors[4000] < 0.3 * errors[0]
 
 
 def test_potential_shaping_with_another_gamma_warns():
