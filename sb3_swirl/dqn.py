@@ -93,9 +93,9 @@ class SwirlDQN(DQN):
         (plus the demo loss) on the prefilled demo transitions alone, the target network copied
         every ``target_update_interval`` of them, so that online learning starts from Q-values
         at the scale of the demos' returns rather than near 0. Where the reward is a cost paid
-        at every step, Q-values near 0 are optimistic: each action the agent tries falls below
-        the ones it has not tried, and the greedy policy drifts off the clone. Needs
-        ``prefill_replay``.
+        at every step, Q-values near 0 are optimistic: the actions the agent tries can fall
+        below the ones it has not tried, and the greedy policy drift off the clone (the
+        README's Table 1: tensioning). Needs ``prefill_replay``.
     infer_actions : {"inverse_dynamics", "none"}
         For demos without actions: label them with an :class:`InverseDynamics` model trained on
         ``inverse_dynamics_steps`` random-action steps in the env (which also go into the
