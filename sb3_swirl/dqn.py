@@ -534,7 +534,8 @@ class SwirlDQN(DQN):
         ``load``) and can be called by hand. Labels state-only demos first (see
         ``infer_actions``), trains ``q_net`` on the demo pairs of every segment with equal
         weight per segment, copies it to ``q_net_target`` and, with ``prefill_replay``, adds
-        the demo transitions to the replay buffer. Logs ``bc/loss`` and ``bc/accuracy``.
+        the demo transitions to the replay buffer, then runs ``pretrain_td_steps`` TD updates
+        on them. Logs ``bc/loss`` and ``bc/accuracy``.
 
         Returns
         -------
