@@ -24,6 +24,7 @@ from sb3_swirl.baselines import run_method
 from sb3_swirl.buffers import DictNStepReplayBuffer
 from sb3_swirl.envs.fetch import FetchDiscreteEnv
 from sb3_swirl.experiments import PRESETS
+from sb3_swirl.supervisors.fetch import PUSH
 from swirl_wrappers import QuadraticReward, Region, SwirlWrapper, TaskModel
 
 pytestmark = pytest.mark.filterwarnings("ignore:.*GoalEnv.*", "ignore:.*compute_reward.*")
@@ -87,11 +88,45 @@ def test_steps_add_up_exactly():
         ({"step_size": 0.1}, r"step_size must be in \(0, 0.05\]"),
         ({"min_goal_distance": 0.5}, r"min_goal_distance must be in \[0, 0.2\]"),
         ({"render_mode": "human"}, "render_mode must be None or 'rgb_array'"),
+        ({"observation_dims": []}, "observation_dims must be a non-empty list of ints"),
+        ({"observation_dims": [0.5]}, "observation_dims must be a non-empty list of ints"),
+        ({"observation_dims": [3, 10]}, r"distinct entries of Fetch's 10-dim observation"),
+        ({"observation_dims": [1, 1]}, r"distinct entries of Fetch's 10-dim observation"),
     ],
 )
 def test_bad_settings_are_refused(kwargs, message):
     with pytest.raises(ValueError, match=message):
         FetchDiscreteEnv(**kwargs)
+
+
+def test_observation_dims_keep_those_entries_and_the_supervisor_still_succeeds():
+    kwargs = {"observation_dims": [6, 7, 8], "goal_offset": True}
+    env = gym.make(_ids("Push"), **kwargs)
+    check_env(env.unwrapped)
+    assert env.observation_space["observation"].shape == (3,)
+    obs, _ = env.reset(seed=2)
+    whole = env.unwrapped.fetch_observation
+    assert whole.shape == (25,)
+    np.testing.assert_array_equal(obs["observation"], whole[6:9])  # object minus gripper
+    np.testing.assert_allclose(obs["observation"], whole[3:6] - whole[0:3], atol=1e-12)
+    # the supervisor reads the whole observation, not the agent's: same demos either way
+    demos = collect_demos(_ids("Push"), 2, seed=1, state_key=KEYS, **kwargs)
+    whole_demos = collect_demos(_ids("Push"), 2, seed=1, state_key=KEYS, goal_offset=True)
+    for short, full in zip(demos, whole_demos, strict=True):
+        np.testing.assert_array_equal(short.actions, full.actions)
+        np.testing.assert_array_equal(short.observations[:, :3], full.observations[:, 6:9])
+        np.testing.assert_array_equal(short.observations[:, 3:], full.observations[:, 25:])
+
+
+def test_push_supervisor_pushes_the_longer_leg_first():
+    """The order of the legs follows from the start, so alike starts get alike demos."""
+    demos, phases = collect_demos(
+        _ids("Push"), 4, seed=3, return_phases=True, state_key=KEYS, goal_offset=True
+    )
+    for demo, phase in zip(demos, phases, strict=True):
+        longer = int(np.argmax(np.abs(demo.observations[0, -3:-1])))  # goal minus object
+        first_push = demo.actions[np.flatnonzero(phase == PUSH)[0]]
+        assert first_push // 2 == longer  # 0, 1: along x; 2, 3: along y
 
 
 @pytest.mark.parametrize("task", TASKS)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+from collections.abc import Sequence
 from typing import Any, ClassVar, SupportsFloat
 
 import gymnasium as gym
@@ -66,6 +67,13 @@ class FetchDiscreteEnv(gym.Env):
         for SWIRL, whose phases look alike across demos only in coordinates relative to the
         object and the goal. Leave it out for ``HerReplayBuffer``, which relabels
         ``desired_goal`` but not the keys computed from it.
+    observation_dims : sequence of int, optional
+        Keep only these entries of Fetch's ``observation`` vector (push and pick-and-place:
+        0-2 gripper position, 3-5 object position, 6-8 the object's offset from the gripper,
+        9-10 finger widths, 11-13 object rotation, 14-16 and 17-19 object velocities, 20-22
+        gripper velocity, 23-24 finger velocities; reach: 0-2 gripper position, 3-4 finger
+        widths, 5-7 and 8-9 velocities). Entries that a task does not need make a policy
+        learned from few demos generalise worse. Default: all.
     render_mode : {"rgb_array"}, optional
         For looking at the scene; never needed for training.
     **fetch_kwargs
@@ -79,6 +87,9 @@ class FetchDiscreteEnv(gym.Env):
         The gripper command in force (pick-and-place; always False on reach and push).
     target : array of shape (3,)
         Where the steps so far take the gripper (m, world frame).
+    fetch_observation : array
+        Fetch's whole ``observation`` vector at the last reset or step (``observation_dims``
+        selects from it).
 
     Examples
     --------
@@ -106,6 +117,7 @@ class FetchDiscreteEnv(gym.Env):
         terminate_on_success: bool = True,
         min_goal_distance: float = 0.1,
         goal_offset: bool = False,
+        observation_dims: Sequence[int] | None = None,
         render_mode: str | None = None,
         **fetch_kwargs: Any,
     ) -> None:
@@ -131,18 +143,24 @@ class FetchDiscreteEnv(gym.Env):
         self.render_mode = render_mode
         self.fetch = _make_fetch(task, render_mode, fetch_kwargs)
         self.goal_offset = bool(goal_offset)
-        self.observation_space = self.fetch.observation_space
-        if self.goal_offset:
-            goal = self.observation_space["desired_goal"]
-            self.observation_space = spaces.Dict(
-                {
-                    **self.observation_space.spaces,
-                    "goal_offset": spaces.Box(-np.inf, np.inf, goal.shape, goal.dtype),
-                }
+        keys = dict(self.fetch.observation_space.spaces)
+        size = keys["observation"].shape[0]
+        self.observation_dims = _check_dims(observation_dims, size)
+        if self.observation_dims is not None:
+            whole = keys["observation"]
+            keys["observation"] = spaces.Box(
+                whole.low[self.observation_dims],
+                whole.high[self.observation_dims],
+                dtype=whole.dtype,
             )
+        if self.goal_offset:
+            goal = keys["desired_goal"]
+            keys["goal_offset"] = spaces.Box(-np.inf, np.inf, goal.shape, goal.dtype)
+        self.observation_space = spaces.Dict(keys)
         self.action_space = spaces.Discrete(6 if self.fetch.block_gripper else 8)
         self.gripper_open = False
         self.target = self._gripper = np.zeros(3)
+        self.fetch_observation = np.zeros(size)
 
     @property
     def distance_threshold(self) -> float:
@@ -171,6 +189,9 @@ class FetchDiscreteEnv(gym.Env):
         return self._observe(obs), info
 
     def _observe(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        self.fetch_observation = obs["observation"].copy()
+        if self.observation_dims is not None:
+            obs["observation"] = obs["observation"][self.observation_dims]
         if self.goal_offset:
             obs["goal_offset"] = obs["desired_goal"] - obs["achieved_goal"]
         return obs
@@ -205,6 +226,21 @@ class FetchDiscreteEnv(gym.Env):
 
     def close(self) -> None:
         self.fetch.close()
+
+
+def _check_dims(dims: Sequence[int] | None, size: int) -> np.ndarray | None:
+    """``observation_dims`` as an index array, or a clear error."""
+    if dims is None:
+        return None
+    arr = np.asarray(dims)
+    if arr.ndim != 1 or arr.size == 0 or not np.issubdtype(arr.dtype, np.integer):
+        raise ValueError(f"observation_dims must be a non-empty list of ints, got {dims!r}")
+    if arr.min() < 0 or arr.max() >= size or len(set(arr.tolist())) != arr.size:
+        raise ValueError(
+            f"observation_dims must be distinct entries of Fetch's {size}-dim observation "
+            f"(0..{size - 1}), got {list(dims)}"
+        )
+    return arr
 
 
 def _make_fetch(task: str, render_mode: str | None, kwargs: dict[str, Any]) -> gym.Env:
