@@ -174,6 +174,10 @@ class TaskEvalCallback(EvalCallback):
     n_eval_episodes, eval_freq, log_path, best_model_save_path, deterministic, render, verbose,
     warn, callback_on_new_best, callback_after_eval :
         As in :class:`stable_baselines3.common.callbacks.EvalCallback`.
+    eval_at_start : bool, default False
+        Also evaluate when training starts, before the first env step: after SwirlDQN's
+        behavioural cloning, so the history starts at what the demos alone give (entry 0, at 0
+        timesteps and 0 episodes).
 
     Examples
     --------
@@ -195,6 +199,7 @@ class TaskEvalCallback(EvalCallback):
         warn: bool = False,
         callback_on_new_best: BaseCallback | None = None,
         callback_after_eval: BaseCallback | None = None,
+        eval_at_start: bool = False,
     ) -> None:
         super().__init__(
             eval_env,
@@ -210,6 +215,7 @@ class TaskEvalCallback(EvalCallback):
             warn=warn,
         )
         self.best_score: tuple[float, float] = (-np.inf, -np.inf)
+        self.eval_at_start = eval_at_start
         self.n_training_episodes = 0
         self.evaluations_episodes: list[int] = []
         self.success_rates: list[float] = []
@@ -235,6 +241,10 @@ class TaskEvalCallback(EvalCallback):
         summary = self._sums.step(i, float(rewards[i]), counted, info)
         if summary is not None:
             self._episodes.append(summary)
+
+    def _on_training_start(self) -> None:
+        if self.eval_at_start and not self.evaluations_timesteps:
+            self.evaluate()
 
     def _on_step(self) -> bool:
         self.n_training_episodes += int(np.sum(self.locals["dones"]))

@@ -82,6 +82,27 @@ def test_task_eval_scores_true_success_and_saves_best(tmp_path):
     assert log["eval/success_rate"] and log["eval/task_return"]
 
 
+def test_eval_at_start_scores_the_bc_start_before_any_env_step():
+    model = SwirlDQN(
+        "MlpPolicy", point_env(), demonstrations=point_demos(3), bc_epochs=100, seed=0,
+        exploration_initial_eps=0.05, learning_starts=1000,
+    )  # fmt: skip
+    callback = TaskEvalCallback(
+        point_env(), n_eval_episodes=3, eval_freq=100, eval_at_start=True, verbose=0
+    )
+    model.learn(200, callback=callback)
+    assert callback.evaluations_timesteps == [0, 100, 200]
+    assert callback.evaluations_episodes[0] == 0
+    assert callback.success_rates[0] == 1.0  # the clone alone walks the demos' route
+    untrained = DQN("MlpPolicy", point_env(), learning_starts=1000, seed=0)
+    callback = TaskEvalCallback(
+        point_env(), n_eval_episodes=3, eval_freq=100, eval_at_start=True, verbose=0
+    )
+    untrained.learn(100, callback=callback)
+    assert callback.evaluations_timesteps == [0, 100]
+    assert callback.success_rates[0] == 0.0
+
+
 def test_callbacks_work_with_ppo_on_a_swirl_env(tmp_path):
     model = PPO("MlpPolicy", point_env(), n_steps=64, batch_size=32, n_epochs=1, seed=0)
     model.set_logger(configure(str(tmp_path), ["csv"]))
