@@ -445,7 +445,8 @@ def run_demo(
     fit_start = time.perf_counter()
     task = fit_task(demos, random_state=seed, **preset.fit_kwargs)
     fit_time = time.perf_counter() - fit_start
-    console.print(f"SWIRL found {task.n_segments} segments in {fit_time:.1f} s")
+    noun = "segment" if task.n_segments == 1 else "segments"
+    console.print(f"SWIRL found {task.n_segments} {noun} in {fit_time:.1f} s")
     task.to_json(out / "task.json")
     plot_segments(demos, task, preset.plot_dims, path=out / "segments.png")
 

@@ -144,7 +144,8 @@ def plot_segments(
     names = _axis_names(task)
     ax.set_xlabel(names[a])
     ax.set_ylabel(names[b])
-    ax.set_title(f"{len(demos)} demonstrations, {task.n_segments} segments")
+    noun = "segment" if task.n_segments == 1 else "segments"
+    ax.set_title(f"{len(demos)} demonstrations, {task.n_segments} {noun}")
     ax.autoscale_view()
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend(loc="best", fontsize="small", ncols=2)
