@@ -419,7 +419,7 @@ def run_demo(
         What ``results.json`` holds.
     """
     from sb3_swirl.fitting import fit_task
-    from sb3_swirl.plotting import plot_segments
+    from sb3_swirl.plotting import _segments, plot_segments
     from sb3_swirl.supervisors import collect_demos
 
     if name not in PRESETS:
@@ -445,8 +445,7 @@ def run_demo(
     fit_start = time.perf_counter()
     task = fit_task(demos, random_state=seed, **preset.fit_kwargs)
     fit_time = time.perf_counter() - fit_start
-    noun = "segment" if task.n_segments == 1 else "segments"
-    console.print(f"SWIRL found {task.n_segments} {noun} in {fit_time:.1f} s")
+    console.print(f"SWIRL found {_segments(task)} in {fit_time:.1f} s")
     task.to_json(out / "task.json")
     plot_segments(demos, task, preset.plot_dims, path=out / "segments.png")
 

@@ -59,6 +59,11 @@ def _check_task(task: Any) -> None:
         )
 
 
+def _segments(task: TaskModel) -> str:
+    """The number of segments in words: "1 segment", "3 segments"."""
+    return f"{task.n_segments} segment" + ("" if task.n_segments == 1 else "s")
+
+
 def plot_segments(
     demos: Any,
     task: TaskModel,
@@ -144,8 +149,7 @@ def plot_segments(
     names = _axis_names(task)
     ax.set_xlabel(names[a])
     ax.set_ylabel(names[b])
-    noun = "segment" if task.n_segments == 1 else "segments"
-    ax.set_title(f"{len(demos)} demonstrations, {task.n_segments} {noun}")
+    ax.set_title(f"{len(demos)} demonstrations, {_segments(task)}")
     ax.autoscale_view()
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend(loc="best", fontsize="small", ncols=2)
