@@ -30,7 +30,7 @@ from sb3_swirl.envs import (
     NoisyAcrobotEnv,
     ParallelParkingEnv,
 )
-from sb3_swirl.features import RBFFeaturesExtractor
+from sb3_swirl.features import KeysExtractor, RBFFeaturesExtractor
 from sb3_swirl.fitting import fit_task
 from sb3_swirl.inverse_dynamics import InverseDynamics
 from sb3_swirl.plotting import (
@@ -61,6 +61,7 @@ __all__ = [
     "Demonstration",
     "FetchDiscreteEnv",
     "InverseDynamics",
+    "KeysExtractor",
     "MaxEntIRLRewardLearner",
     "NoisyAcrobotEnv",
     "ParallelParkingEnv",

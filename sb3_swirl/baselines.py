@@ -386,10 +386,12 @@ def _her_hyperparams(hyperparams: dict[str, Any], preset: Any) -> dict[str, Any]
     goals per transition, as in the HER paper). HER relabels ``desired_goal`` alone, so the
     env gets no observation key computed from the goal (the Fetch tasks' ``goal_offset``).
     SwirlDQN's relabelled rewards read each step's info (``copy_info_dict``); HER has 1-step
-    returns only."""
+    returns only. The relabelled goal must reach the network, so it reads every key (an
+    entry's :class:`~sb3_swirl.features.KeysExtractor` is dropped)."""
     from stable_baselines3 import HerReplayBuffer
 
-    from sb3_swirl.experiments import _normalize_kwargs, _swirl_spec
+    from sb3_swirl.experiments import _normalize_kwargs, _policy_kwargs, _swirl_spec
+    from sb3_swirl.features import KeysExtractor
 
     if not hyperparams.get("policy", "").startswith("MultiInput"):
         raise ValueError(f"HER needs a goal env with Dict observations; {preset.env_id} is not")
@@ -400,6 +402,11 @@ def _her_hyperparams(hyperparams: dict[str, Any], preset: Any) -> dict[str, Any]
     if normalize is not None and "norm_obs_keys" in normalize:
         keys = [key for key in normalize["norm_obs_keys"] if key != "goal_offset"]
         hyperparams["normalize"] = normalize | {"norm_obs_keys": keys}
+    policy_kwargs = _policy_kwargs(hyperparams.get("policy_kwargs"))
+    if policy_kwargs and policy_kwargs.get("features_extractor_class") is KeysExtractor:
+        hyperparams["policy_kwargs"] = {
+            k: v for k, v in policy_kwargs.items() if not k.startswith("features_extractor")
+        }
     buffer_kwargs: dict[str, Any] = {"n_sampled_goal": 4, "goal_selection_strategy": "future"}
     spec = _swirl_spec(hyperparams)
     if spec:

@@ -122,14 +122,21 @@ def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
 
 
 def _algo_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
+    kwargs = {k: v for k, v in hyperparams.items() if k not in _ZOO_ONLY_KEYS}
+    if "policy_kwargs" in kwargs:
+        kwargs["policy_kwargs"] = _policy_kwargs(kwargs["policy_kwargs"])
+    return kwargs
+
+
+def _policy_kwargs(policy_kwargs: Any) -> dict[str, Any] | None:
+    """An rl-zoo ``policy_kwargs`` value as a dict: rl-zoo evaluates strings with nn/th/np in
+    scope (and Python's builtins, so ``__import__('sb3_swirl').KeysExtractor``); so do we."""
     import torch as th
     from torch import nn
 
-    kwargs = {k: v for k, v in hyperparams.items() if k not in _ZOO_ONLY_KEYS}
-    if isinstance(kwargs.get("policy_kwargs"), str):
-        # rl-zoo evaluates policy_kwargs strings with nn/th/np in scope; do the same
-        kwargs["policy_kwargs"] = eval(kwargs["policy_kwargs"], {"nn": nn, "th": th, "np": np})
-    return kwargs
+    if isinstance(policy_kwargs, str):
+        return eval(policy_kwargs, {"nn": nn, "th": th, "np": np})
+    return policy_kwargs
 
 
 def _normalize_kwargs(normalize: Any) -> dict[str, Any] | None:

@@ -1,4 +1,5 @@
-"""Radial-basis-function features for approximate Q-learning (the paper's Q representation)."""
+"""Features extractors: radial basis functions (the paper's Q representation) and a choice of
+keys of a Dict observation."""
 
 from __future__ import annotations
 
@@ -7,9 +8,10 @@ from collections.abc import Sequence
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, CombinedExtractor
 
 from swirl_wrappers._validation import check_real
+from swirl_wrappers.wrappers import SEGMENT_KEY
 
 
 class RBFFeaturesExtractor(BaseFeaturesExtractor):
@@ -119,3 +121,67 @@ class RBFFeaturesExtractor(BaseFeaturesExtractor):
             return rbf
         one_hot = observations[:, self.state_dim :]
         return (rbf.unsqueeze(2) * one_hot.unsqueeze(1)).flatten(1)
+
+
+class KeysExtractor(CombinedExtractor):
+    """SB3's :class:`~stable_baselines3.common.torch_layers.CombinedExtractor` over some keys of a
+    Dict observation: the network reads only those.
+
+    The keys stay in the env, where others need them: a goal env's ``achieved_goal`` and
+    ``desired_goal`` for ``compute_reward`` and hindsight relabelling, a supervisor's view for
+    demos. On a SWIRL-wrapped env the segment key is always read.
+
+    Parameters
+    ----------
+    observation_space : gymnasium.spaces.Dict
+        The whole observation space.
+    keys : sequence of str
+        The keys the network reads.
+    cnn_output_dim, normalized_image
+        As for ``CombinedExtractor`` (image keys).
+
+    Raises
+    ------
+    TypeError
+        If the observation space is not a Dict.
+    ValueError
+        If ``keys`` is empty or names a key the observation does not have.
+
+    Examples
+    --------
+    >>> import numpy as np, torch as th
+    >>> from gymnasium import spaces
+    >>> space = spaces.Dict({"observation": spaces.Box(-1, 1, (3,)),
+    ...                      "desired_goal": spaces.Box(-1, 1, (3,))})
+    >>> fe = KeysExtractor(space, keys=["observation"])
+    >>> fe.features_dim
+    3
+    >>> fe({"observation": th.ones(1, 3), "desired_goal": th.zeros(1, 3)})
+    tensor([[1., 1., 1.]])
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Dict,
+        keys: Sequence[str],
+        cnn_output_dim: int = 256,
+        normalized_image: bool = False,
+    ) -> None:
+        if not isinstance(observation_space, spaces.Dict):
+            raise TypeError(
+                f"KeysExtractor reads keys of a Dict observation, got {observation_space}"
+            )
+        keys = [keys] if isinstance(keys, str) else list(keys)
+        if not keys:
+            raise ValueError("KeysExtractor needs at least one key")
+        unknown = [key for key in keys if key not in observation_space.spaces]
+        if unknown:
+            raise ValueError(
+                f"KeysExtractor: {unknown} not among the observation's keys "
+                f"{list(observation_space.spaces)}"
+            )
+        if SEGMENT_KEY in observation_space.spaces and SEGMENT_KEY not in keys:
+            keys.append(SEGMENT_KEY)
+        chosen = spaces.Dict({key: observation_space[key] for key in keys})
+        super().__init__(chosen, cnn_output_dim=cnn_output_dim, normalized_image=normalized_image)
+        self.keys = keys

@@ -11,6 +11,7 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch as th
 import yaml
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3 import DQN, HerReplayBuffer
@@ -19,7 +20,7 @@ from stable_baselines3.common.env_checker import check_env
 from stable_baselines3.common.utils import set_random_seed
 
 import sb3_swirl.envs  # noqa: F401  (registers the ids)
-from sb3_swirl import SwirlDQN, collect_demos, fit_task
+from sb3_swirl import KeysExtractor, SwirlDQN, collect_demos, fit_task
 from sb3_swirl.baselines import run_method
 from sb3_swirl.buffers import DictNStepReplayBuffer
 from sb3_swirl.envs.fetch import FetchDiscreteEnv
@@ -328,6 +329,37 @@ def test_swirl_dqn_clones_and_prefills_dict_demos_and_saves_them(tmp_path):
     assert loaded.replay_buffer.n_steps == 5
     obs, _ = env.reset(seed=0)
     assert loaded.predict(obs, deterministic=True)[0] == model.predict(obs, deterministic=True)[0]
+
+
+def test_keys_extractor_reads_only_its_keys_and_saves(tmp_path):
+    """The network reads the offsets and the segment, not the absolute goals, which the env
+    keeps for compute_reward and the supervisor."""
+    demos = collect_demos(_ids("Reach"), 2, seed=0, state_key=KEYS, goal_offset=True)
+    env = SwirlWrapper(
+        gym.make(_ids("Reach"), goal_offset=True), _goal_task([16, 17, 18]), state_key=KEYS
+    )
+    kwargs = {"features_extractor_class": KeysExtractor}
+    kwargs["features_extractor_kwargs"] = {"keys": ["observation", "goal_offset"]}
+    model = SwirlDQN("MultiInputPolicy", env, demonstrations=demos, policy_kwargs=kwargs, seed=0)
+    model.pretrain()
+    assert model.q_net.features_extractor.keys == ["observation", "goal_offset", "segment"]
+    obs, _ = env.reset(seed=0)
+    q = model.q_net(model.policy.obs_to_tensor(obs)[0])
+    moved = {
+        **obs,
+        "desired_goal": obs["desired_goal"] + 1,
+        "achieved_goal": obs["achieved_goal"] * 0,
+    }
+    assert th.equal(model.q_net(model.policy.obs_to_tensor(moved)[0]), q)
+    shifted = {**obs, "goal_offset": obs["goal_offset"] + 0.1}
+    assert not th.equal(model.q_net(model.policy.obs_to_tensor(shifted)[0]), q)
+    model.save(tmp_path / "model")
+    loaded = SwirlDQN.load(tmp_path / "model", env=env)
+    assert th.equal(loaded.q_net(loaded.policy.obs_to_tensor(obs)[0]), q)
+    with pytest.raises(ValueError, match=r"\['goal'\] not among the observation's keys"):
+        KeysExtractor(env.observation_space, keys=["goal"])
+    with pytest.raises(TypeError, match="Dict observation"):
+        KeysExtractor(gym.spaces.Box(0, 1, (2,)), keys=["observation"])
 
 
 def test_swirl_dqn_learns_fetch_reach_within_a_small_budget():
