@@ -403,7 +403,8 @@ def _her_hyperparams(hyperparams: dict[str, Any], preset: Any) -> dict[str, Any]
         keys = [key for key in normalize["norm_obs_keys"] if key != "goal_offset"]
         hyperparams["normalize"] = normalize | {"norm_obs_keys": keys}
     policy_kwargs = _policy_kwargs(hyperparams.get("policy_kwargs"))
-    if policy_kwargs and policy_kwargs.get("features_extractor_class") is KeysExtractor:
+    extractor = (policy_kwargs or {}).get("features_extractor_class")
+    if isinstance(extractor, type) and issubclass(extractor, KeysExtractor):
         hyperparams["policy_kwargs"] = {
             k: v for k, v in policy_kwargs.items() if not k.startswith("features_extractor")
         }

@@ -129,8 +129,9 @@ def _algo_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
 
 
 def _policy_kwargs(policy_kwargs: Any) -> dict[str, Any] | None:
-    """An rl-zoo ``policy_kwargs`` value as a dict: rl-zoo evaluates strings with nn/th/np in
-    scope (and Python's builtins, so ``__import__('sb3_swirl').KeysExtractor``); so do we."""
+    """An rl-zoo ``policy_kwargs`` value as a dict. rl-zoo evaluates strings in its own
+    module's scope, which has nn, th and np but not sb3_swirl (hence
+    ``__import__('sb3_swirl').KeysExtractor`` in our entries); we give nn, th and np."""
     import torch as th
     from torch import nn
 

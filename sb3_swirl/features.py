@@ -127,16 +127,20 @@ class KeysExtractor(CombinedExtractor):
     """SB3's :class:`~stable_baselines3.common.torch_layers.CombinedExtractor` over some keys of a
     Dict observation: the network reads only those.
 
-    The keys stay in the env, where others need them: a goal env's ``achieved_goal`` and
-    ``desired_goal`` for ``compute_reward`` and hindsight relabelling, a supervisor's view for
-    demos. On a SWIRL-wrapped env the segment key is always read.
+    The other keys stay in the observation, where others need them: a goal env's
+    ``achieved_goal`` and ``desired_goal`` for ``compute_reward`` and hindsight relabelling, a
+    supervisor's view for demos. On a SWIRL-wrapped env the segment key is always read. The
+    features are joined in the Dict's (sorted) key order, as :attr:`keys` lists them.
+
+    A network that reads no goal cannot learn from relabelled goals: give HER runs every key
+    (``sb3-swirl reproduce`` drops this extractor for them).
 
     Parameters
     ----------
     observation_space : gymnasium.spaces.Dict
         The whole observation space.
-    keys : sequence of str
-        The keys the network reads.
+    keys : str or sequence of str
+        The keys the network reads (at least one besides the segment key).
     cnn_output_dim, normalized_image
         As for ``CombinedExtractor`` (image keys).
 
@@ -184,4 +188,5 @@ class KeysExtractor(CombinedExtractor):
             keys.append(SEGMENT_KEY)
         chosen = spaces.Dict({key: observation_space[key] for key in keys})
         super().__init__(chosen, cnn_output_dim=cnn_output_dim, normalized_image=normalized_image)
-        self.keys = keys
+        #: the keys read, in the order their features are joined
+        self.keys = list(chosen.spaces)

@@ -342,7 +342,7 @@ def test_keys_extractor_reads_only_its_keys_and_saves(tmp_path):
     kwargs["features_extractor_kwargs"] = {"keys": ["observation", "goal_offset"]}
     model = SwirlDQN("MultiInputPolicy", env, demonstrations=demos, policy_kwargs=kwargs, seed=0)
     model.pretrain()
-    assert model.q_net.features_extractor.keys == ["observation", "goal_offset", "segment"]
+    assert model.q_net.features_extractor.keys == ["goal_offset", "observation", "segment"]
     obs, _ = env.reset(seed=0)
     q = model.q_net(model.policy.obs_to_tensor(obs)[0])
     moved = {
