@@ -25,6 +25,7 @@ from sb3_swirl.baselines import run_method
 from sb3_swirl.buffers import DictNStepReplayBuffer
 from sb3_swirl.envs.fetch import FetchDiscreteEnv
 from sb3_swirl.experiments import PRESETS
+from sb3_swirl.supervisors import _run_episode
 from sb3_swirl.supervisors.fetch import PUSH, FetchPushSupervisor
 from swirl_wrappers import QuadraticReward, Region, SwirlWrapper, TaskModel
 
@@ -135,13 +136,8 @@ def test_push_supervisor_keeps_the_object_on_the_table(supervisor_seed):
     """From this start, legs that ended 1.5 cm from the goal let the object slide over the
     table's edge (it slides on after the last push)."""
     env = gym.make(_ids("Push"))
-    supervisor = FetchPushSupervisor(env.unwrapped, seed=supervisor_seed)
-    obs, _ = env.reset(seed=906654279)
-    supervisor.reset(obs)
-    terminated = truncated = False
-    while not (terminated or truncated):
-        obs, _, terminated, truncated, info = env.step(supervisor.act(obs))
-    assert info["is_success"] and env.unwrapped.fetch_observation[5] > 0.4  # on the table
+    demo, _ = _run_episode(env, FetchPushSupervisor, 906654279, supervisor_seed, "observation")
+    assert demo is not None and env.unwrapped.fetch_observation[5] > 0.4  # on the table
 
 
 @pytest.mark.parametrize("task", TASKS)

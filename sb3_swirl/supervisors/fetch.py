@@ -17,6 +17,8 @@ from sb3_swirl.supervisors._shared import controlled_env, step_towards
 UP = 4
 #: height (m) above the object's centre at which the gripper travels over it
 _CLEARANCE = 0.08
+#: height (m) above the object's centre under which push's gripper is down at the object
+_LOWERED = 0.03
 #: height (m) above the object's centre at which pick-and-place closes the fingers (fingers
 #: that touch the table close slowly and let the object go)
 _GRASP_HEIGHT = 0.005
@@ -149,7 +151,8 @@ class FetchPushSupervisor(_FetchSupervisor):
             # pushed past the goal, the object is no longer ahead of the (observed) gripper
             ahead = (cube[axis] - self.env.fetch_observation[axis]) * signs[axis]
             lined_up = abs(grip[1 - axis] - cube[1 - axis]) <= self.tolerance
-            if grip[2] < cube[2] + 0.03 and lined_up and 0 < ahead <= self.behind + self.tolerance:
+            lowered = grip[2] < cube[2] + _LOWERED
+            if lowered and lined_up and 0 < ahead <= self.behind + self.tolerance:
                 self._phase = PUSH
                 return self._push(axis, signs[axis])
         axis = max(legs, key=lambda a: abs(error[a])) if legs else int(np.argmax(abs(error)))
@@ -163,7 +166,7 @@ class FetchPushSupervisor(_FetchSupervisor):
         if grip[2] < cube[2] + _CLEARANCE - self.env.step_size / 2:
             self._phase = LIFT
             away = grip[:2] - cube[:2]
-            if grip[2] < cube[2] + 0.03 and np.linalg.norm(away) < self.behind + 0.01:
+            if grip[2] < cube[2] + _LOWERED and np.linalg.norm(away) < self.behind + 0.01:
                 # back off before lifting: a gripper that rises against the object drags it
                 return int(np.argmax(DIRECTIONS[:4, :2] @ away))
             return UP
