@@ -4,19 +4,25 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo demo-acrobot demo-linecutting demo-tensioning demo-fetchpush table1 test test-slow bench lint format clean
+.PHONY: install lock demo demo-acrobot demo-linecutting demo-tensioning demo-fetchpush table1 test test-slow bench lint format clean
 
 install: $(STAMP)
 
-$(STAMP): pyproject.toml wrappers/pyproject.toml Makefile
+$(STAMP): pyproject.toml wrappers/pyproject.toml constraints.txt Makefile
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# torch first, pinned: an unpinned torch pulls a multi-GB CUDA build
-	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e ./wrappers -e ".[zoo,render,robosuite,fetch,ray,dev]"
+	$(BIN)/python -m pip install --quiet -c constraints.txt torch==2.13.0
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e ./wrappers -e ".[zoo,render,robosuite,fetch,ray,dev]"
 	# imitation pins old SB3/gymnasium; its data types work with ours (see NOTES-stack.md)
 	$(BIN)/python -m pip install --quiet --no-deps imitation==1.0.1 seals==0.2.1
 	touch $(STAMP)
+
+# pin what the current .venv holds (torch's local +cpu tag left to the index)
+lock:
+	head -3 constraints.txt > constraints.new
+	$(BIN)/python -m pip freeze --exclude-editable | sed 's/+cpu$$//' >> constraints.new
+	mv constraints.new constraints.txt
 
 demo: install
 	$(BIN)/sb3-swirl demo parking
