@@ -125,7 +125,22 @@ def _algo_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
     kwargs = {k: v for k, v in hyperparams.items() if k not in _ZOO_ONLY_KEYS}
     if "policy_kwargs" in kwargs:
         kwargs["policy_kwargs"] = _policy_kwargs(kwargs["policy_kwargs"])
+    if isinstance(kwargs.get("learning_rate"), str):
+        kwargs["learning_rate"] = _linear_schedule(kwargs["learning_rate"])
     return kwargs
+
+
+def _linear_schedule(value: str) -> Any:
+    """rl-zoo's ``lin_<initial value>``: a learning rate that falls linearly to 0 over the run."""
+    from stable_baselines3.common.utils import LinearSchedule
+
+    kind, _, initial = value.partition("_")
+    if kind == "lin":
+        try:
+            return LinearSchedule(float(initial), 0.0, 1.0)
+        except ValueError:
+            pass
+    raise ValueError(f"learning_rate {value!r}: give a number or rl-zoo's 'lin_<initial value>'")
 
 
 def _policy_kwargs(policy_kwargs: Any) -> dict[str, Any] | None:

@@ -412,6 +412,25 @@ def test_tuned_swirl_dqn_parks_after_a_short_run(parking):
     assert success_count(untrained, gym.make(PARKING), 20, seed=100) == 0
 
 
+def test_zoo_linear_learning_rate_schedule_and_a_bad_one():
+    """An entry's ``learning_rate: lin_1e-3`` means what it means in rl-zoo: 1e-3 falling to 0."""
+    from sb3_swirl.experiments import load_hyperparams, train_and_evaluate
+
+    hyperparams = load_hyperparams("dqn", PARKING) | {"learning_rate": "lin_1e-3"}
+    budget = dict(total_timesteps=400, seed=0, progress=False, hyperparams=hyperparams)
+    record = train_and_evaluate("dqn", PRESETS["parking"], keep_model=True, **budget)
+    model = record["model"]
+    assert model.lr_schedule(1.0) == pytest.approx(1e-3)
+    assert model.lr_schedule(0.0) == 0.0
+    assert model.policy.optimizer.param_groups[0]["lr"] < 1e-4  # decayed to 0 by the last update
+    with pytest.raises(ValueError, match="learning_rate 'cos_1e-3'"):
+        train_and_evaluate(
+            "dqn",
+            PRESETS["parking"],
+            **budget | {"hyperparams": hyperparams | {"learning_rate": "cos_1e-3"}},
+        )
+
+
 @pytest.mark.slow
 def test_swirl_dqn_learns_parking_where_dqn_does_not(parking):
     from sb3_swirl.experiments import train_and_evaluate
