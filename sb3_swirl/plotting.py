@@ -327,11 +327,11 @@ def plot_cut_paths(
                 break
         tool = np.array(tool)
         ok = bool(info.get("is_success"))
-        label = f"episode {i}: " + (
-            f"cut, errors {info['position_error_cm']:.2f} / {info['tracking_error_cm']:.2f} cm"
-            if ok
-            else "failed"
-        )
+        if info.get("cutting"):
+            errors = f"errors {info['position_error_cm']:.2f} / {info['tracking_error_cm']:.2f} cm"
+            label = f"episode {i}: " + ("cut, " if ok else "failed (off the line), ") + errors
+        else:
+            label = f"episode {i}: failed (never on the line)"
         ax.plot(*tool.T, color=colors[i], linestyle="-" if ok else "--", label=label)
         ax.plot(*tool[0], "o", color=colors[i], markersize=4)
     ax.plot(*line.T, color="black", linewidth=3, alpha=0.6, label="marked line")

@@ -130,18 +130,21 @@ def test_supervisor_lines_up_across_the_line_before_moving_in(env):
     assert any(sideways) and not any(sideways[sideways.index(False) :])
 
 
-def test_leaving_the_line_fails_the_cut(env):
+def test_leaving_the_line_fails_the_cut_which_goes_on_to_the_end(env):
     sup = LineCuttingSupervisor(env, seed=0)
     obs, _ = env.reset(seed=0)
     sup.reset(obs)
     while sup.phase != FOLLOW or not env.step(sup.act(obs))[4]["cutting"]:
         obs = env.step(sup.act(obs))[0]
-    for _ in range(30):
-        obs, reward, terminated, _, info = env.step(3)  # -y, off the line
-        if terminated:
+    for _ in range(8):  # -y, more than 1 cm off the line
+        obs, reward, terminated, _, info = env.step(3)
+    assert obs[2] > 1.0 and info["off_line"] and not terminated  # failed, not ended
+    for _ in range(100):  # back to the line and along it, as the supervisor would
+        obs, reward, terminated, truncated, info = env.step(sup.act(obs))
+        if terminated or truncated:
             break
     assert terminated and not info["is_success"] and reward == 0.0
-    assert obs[2] > 1.0
+    assert info["off_line"] and info["line_distance_cm"] < 1.0
 
 
 @pytest.mark.parametrize(

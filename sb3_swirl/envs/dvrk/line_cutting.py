@@ -108,13 +108,15 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
 
     **Episode.** The tool starts at a random place 2–4 cm before the line's start and up to
     2 cm to either side. The cut begins at the first step the tool is within ``on_line``
-    (3 mm) of the line; the *position error* is then its distance to the line's start. The cut
-    succeeds when the tool reaches the end of the line having never been more than
-    ``tolerance`` (1 cm) from it; it fails, and the episode ends, when the position error
-    exceeds ``tolerance`` or the tool leaves the line by more than ``tolerance``. Reward 1.0 on
-    success, 0 otherwise. The registered id truncates at 150 steps. ``info`` holds
+    (3 mm) of the line; the *position error* is then its distance to the line's start. The
+    episode ends when the point of the line nearest the tool reaches the line's end. The cut
+    succeeds if the position error is at most ``tolerance`` (1 cm) and the tool was never more
+    than ``tolerance`` from the line. A cut that fails goes on to the end, as the paper's did
+    (its tracking errors reach 2.4 cm), so the tracking error covers the whole cut. Reward 1.0
+    on success, 0 otherwise. The registered id truncates at 150 steps. ``info`` holds
     ``line_distance_cm``, ``cutting``, ``is_success`` and, once the cut has begun,
-    ``position_error_cm`` and ``tracking_error_cm`` (the mean distance to the line so far).
+    ``position_error_cm``, ``tracking_error_cm`` (the mean distance to the line so far) and
+    ``off_line`` (the cut has already failed).
 
     Parameters
     ----------
@@ -185,6 +187,7 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
             dtype=np.float32,
         )
         self._cutting = False
+        self._failed = False
         self._errors: list[float] = []
         self._position_error = float("nan")
 
@@ -217,6 +220,7 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
         self._line = self._shape + self.line_start + offset
         self.sim.model.body_pos[self._task.line_body_id][:2] = self._line[0]
         self._cutting = False
+        self._failed = False
         self._errors = []
         self._position_error = float("nan")
         self._grip = 1.0  # the closed gripper is the tool, from the first settling step on
@@ -248,7 +252,8 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
         self._errors.append(d)
         info["position_error_cm"] = 100.0 * self._position_error
         info["tracking_error_cm"] = 100.0 * float(np.mean(self._errors))
-        failed = self._position_error > self.tolerance or d > self.tolerance
+        self._failed |= self._position_error > self.tolerance or d > self.tolerance
+        info["off_line"] = self._failed
         done = s >= self.line_length - self.step_size
-        info["is_success"] = success = done and not failed
-        return float(success), failed or done, info
+        info["is_success"] = success = done and not self._failed
+        return float(success), done, info
