@@ -397,19 +397,7 @@ def test_zoo_trains_and_enjoys_swirl_dqn_on_fetch_reach(tmp_path):
         return result.stdout
 
     common = ["--env", "sb3_swirl/FetchReachDiscrete-v0", "-f", "logs", "--seed", "0"]
-    # one torch thread: beside the other test worker, more only contend for the 2 cores
-    zoo(
-        "train",
-        "--algo",
-        "swirl_dqn",
-        "-n",
-        "600",
-        "--eval-freq",
-        "300",
-        "--num-threads",
-        "1",
-        *common,
-    )
+    zoo("train", "--algo", "swirl_dqn", "-n", "600", "--eval-freq", "300", *common)
     params = tmp_path / "logs/swirl_dqn/sb3_swirl-FetchReachDiscrete-v0_1"
     params = params / "sb3_swirl-FetchReachDiscrete-v0"
     args = yaml.load((params / "args.yml").read_text(), Loader=yaml.UnsafeLoader)

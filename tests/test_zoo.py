@@ -3,7 +3,6 @@ TensorBoard and the zoo's plots, on tiny budgets."""
 
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 import sys
@@ -26,10 +25,8 @@ CLI = [sys.executable, "-m", "sb3_swirl.cli", "zoo"]
 
 
 def _run(args: list[str], cwd: Path) -> str:
-    # one torch thread: beside the other test worker, more only contend for the 2 cores
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
     result = subprocess.run(
-        [*CLI, *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=600, check=False
+        [*CLI, *args], cwd=cwd, capture_output=True, text=True, timeout=600, check=False
     )
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     return result.stdout
