@@ -329,7 +329,7 @@ def plot_cut_paths(
         ok = bool(info.get("is_success"))
         if info.get("cutting"):
             errors = f"errors {info['position_error_cm']:.2f} / {info['tracking_error_cm']:.2f} cm"
-            label = f"episode {i}: " + ("cut, " if ok else "failed (off the line), ") + errors
+            label = f"episode {i}: " + ("cut, " if ok else "failed, ") + errors
         else:
             label = f"episode {i}: failed (never on the line)"
         ax.plot(*tool.T, color=colors[i], linestyle="-" if ok else "--", label=label)

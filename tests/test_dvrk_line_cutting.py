@@ -138,13 +138,13 @@ def test_leaving_the_line_fails_the_cut_which_goes_on_to_the_end(env):
         obs = env.step(sup.act(obs))[0]
     for _ in range(8):  # -y, more than 1 cm off the line
         obs, reward, terminated, _, info = env.step(3)
-    assert obs[2] > 1.0 and info["off_line"] and not terminated  # failed, not ended
+    assert obs[2] > 1.0 and info["cut_failed"] and not terminated  # failed, not ended
     for _ in range(100):  # back to the line and along it, as the supervisor would
         obs, reward, terminated, truncated, info = env.step(sup.act(obs))
         if terminated or truncated:
             break
     assert terminated and not info["is_success"] and reward == 0.0
-    assert info["off_line"] and info["line_distance_cm"] < 1.0
+    assert info["cut_failed"] and info["line_distance_cm"] < 1.0
 
 
 @pytest.mark.parametrize(

@@ -116,7 +116,8 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
     on success, 0 otherwise. The registered id truncates at 150 steps. ``info`` holds
     ``line_distance_cm``, ``cutting``, ``is_success`` and, once the cut has begun,
     ``position_error_cm``, ``tracking_error_cm`` (the mean distance to the line so far) and
-    ``off_line`` (the cut has already failed).
+    ``cut_failed`` (the cut has already failed: it began more than ``tolerance`` from the line's
+    start, or the tool has been more than ``tolerance`` off the line).
 
     Parameters
     ----------
@@ -253,7 +254,7 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
         info["position_error_cm"] = 100.0 * self._position_error
         info["tracking_error_cm"] = 100.0 * float(np.mean(self._errors))
         self._failed |= self._position_error > self.tolerance or d > self.tolerance
-        info["off_line"] = self._failed
+        info["cut_failed"] = self._failed
         done = s >= self.line_length - self.step_size
         info["is_success"] = success = done and not self._failed
         return float(success), done, info
