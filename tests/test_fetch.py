@@ -4,8 +4,6 @@ observations, and hindsight relabelling (HER) with the SWIRL wrapper."""
 from __future__ import annotations
 
 import dataclasses
-import subprocess
-import sys
 import warnings
 
 import gymnasium as gym
@@ -386,21 +384,17 @@ def test_dqn_her_and_bc_run_on_fetch_reach():
     assert bc["curve"][-1]["timesteps"] == 0 and 0.0 <= bc["final_success"] <= 1.0
 
 
-def test_zoo_trains_and_enjoys_swirl_dqn_on_fetch_reach(tmp_path):
+def test_zoo_trains_and_enjoys_swirl_dqn_on_fetch_reach(tmp_path, zoo_cli):
     """The entry's env_kwargs (goal_offset) reach the zoo's evaluation env and `enjoy` too
     (rl_zoo3 gives them to the training env only), and VecNormalize's statistics are saved."""
 
-    def zoo(*args: str) -> str:
-        cli = [sys.executable, "-m", "sb3_swirl.cli", "zoo", *args]
-        result = subprocess.run(cli, cwd=tmp_path, capture_output=True, text=True, check=False)
-        assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-        return result.stdout
-
     common = ["--env", "sb3_swirl/FetchReachDiscrete-v0", "-f", "logs", "--seed", "0"]
-    zoo("train", "--algo", "swirl_dqn", "-n", "600", "--eval-freq", "300", *common)
+    zoo_cli("train", "--algo", "swirl_dqn", "-n", "600", "--eval-freq", "300", *common)
     params = tmp_path / "logs/swirl_dqn/sb3_swirl-FetchReachDiscrete-v0_1"
     params = params / "sb3_swirl-FetchReachDiscrete-v0"
     args = yaml.load((params / "args.yml").read_text(), Loader=yaml.UnsafeLoader)
     assert args["env_kwargs"] == {"goal_offset": True}
     assert (params / "vecnormalize.pkl").is_file()
-    assert "true return" in zoo("enjoy", "--algo", "swirl_dqn", "-n", "60", "--no-render", *common)
+    assert "true return" in zoo_cli(
+        "enjoy", "--algo", "swirl_dqn", "-n", "60", "--no-render", *common
+    )

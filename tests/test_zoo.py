@@ -4,8 +4,6 @@ TensorBoard and the zoo's plots, on tiny budgets."""
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
@@ -21,15 +19,6 @@ from sb3_swirl import zoo
 
 ROOT = Path(__file__).resolve().parents[1]
 PARKING = "sb3_swirl/ParallelParking-v0"
-CLI = [sys.executable, "-m", "sb3_swirl.cli", "zoo"]
-
-
-def _run(args: list[str], cwd: Path) -> str:
-    result = subprocess.run(
-        [*CLI, *args], cwd=cwd, capture_output=True, text=True, timeout=600, check=False
-    )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    return result.stdout
 
 
 def _mountaincar_demos(path: Path, n: int = 10) -> None:
@@ -107,16 +96,16 @@ def test_shipped_configs_cover_every_registered_task(algo):
             assert spec["reward_config"]["gamma"] == entries[env_id]["gamma"]
 
 
-def test_train_enjoy_tensorboard_and_plots_swirl_dqn_and_dqn(tmp_path):
+def test_train_enjoy_tensorboard_and_plots_swirl_dqn_and_dqn(tmp_path, zoo_cli):
     """The zoo's log folders (config, model, task), true-reward evaluations, swirl/ keys in
     TensorBoard, enjoy with the segment shown, and rl_zoo3's plots of both algorithms."""
     common = ["--env", PARKING, "-f", "logs", "-n", "2000", "--eval-freq", "1000"]
     common += ["--eval-episodes", "3"]
-    _run(["train", "--algo", "swirl_dqn", "--seed", "0", "-tb", "tb", *common], tmp_path)
+    zoo_cli("train", "--algo", "swirl_dqn", "--seed", "0", "-tb", "tb", *common)
     # a second seed of each: the zoo's plots aggregate over runs
-    _run(["train", "--algo", "swirl_dqn", "--seed", "1", *common], tmp_path)
+    zoo_cli("train", "--algo", "swirl_dqn", "--seed", "1", *common)
     for seed in ("0", "1"):
-        _run(["train", "--algo", "dqn", "--seed", seed, *common], tmp_path)
+        zoo_cli("train", "--algo", "dqn", "--seed", seed, *common)
 
     run = tmp_path / "logs/swirl_dqn/sb3_swirl-ParallelParking-v0_1"
     params = run / "sb3_swirl-ParallelParking-v0"
@@ -143,15 +132,15 @@ def test_train_enjoy_tensorboard_and_plots_swirl_dqn_and_dqn(tmp_path):
     assert {"swirl/final_segment_mean", "swirl/reach_rate_seg0", "bc/accuracy"} <= scalars
 
     enjoy = ["--env", PARKING, "-f", "logs", "-n", "210", "--no-render"]  # > one episode
-    out = _run(["enjoy", "--algo", "swirl_dqn", *enjoy], tmp_path)
+    out = zoo_cli("enjoy", "--algo", "swirl_dqn", *enjoy)
     assert f"the model's task, {task.n_segments} segments" in out
     assert re.search(r"step \d+: segment 1 \(of 0-", out)
     assert "true return" in out
-    assert "Episode Length" in _run(["enjoy", "--algo", "dqn", *enjoy], tmp_path)
+    assert "Episode Length" in zoo_cli("enjoy", "--algo", "dqn", *enjoy)
 
     plots = ["all_plots", "-a", "swirl_dqn", "dqn", "-e", "ParallelParking-v0", "-f", "logs"]
-    _run([*plots, "--no-display", "-o", "curves", "-k", "results"], tmp_path)
-    _run(["plot_from_file", "-i", "curves.pkl", "-o", "curves.png", "--format", "png"], tmp_path)
+    zoo_cli(*plots, "--no-display", "-o", "curves", "-k", "results")
+    zoo_cli("plot_from_file", "-i", "curves.pkl", "-o", "curves.png", "--format", "png")
     assert (tmp_path / "curves.png").stat().st_size > 1000
 
 
@@ -207,7 +196,7 @@ def test_bad_yaml_fails_before_training_naming_the_problem(
     assert not (tmp_path / "logs").exists()  # nothing started
 
 
-def test_optimize_two_trials_writes_the_study(tmp_path):
+def test_optimize_two_trials_writes_the_study(tmp_path, zoo_cli):
     args = [
         "train",
         "--algo",
@@ -222,7 +211,7 @@ def test_optimize_two_trials_writes_the_study(tmp_path):
         "0",
     ]
     args += ["-optimize", "--n-trials", "2", "--n-evaluations", "1", "--eval-episodes", "2"]
-    _run([*args, "--no-optim-plots", "--sampler", "random", "--pruner", "none"], tmp_path)
+    zoo_cli(*args, "--no-optim-plots", "--sampler", "random", "--pruner", "none")
     (report,) = (tmp_path / "logs/swirl_dqn").glob("report_*.csv")
     text = report.read_text()
     assert "params_reg_covar" in text and "params_bc_epochs" in text
