@@ -488,7 +488,12 @@ def segment_boundaries(states: np.ndarray, regions: Sequence[Region]) -> np.ndar
         ``out[i]`` is the step at which region ``i`` is reached, checking region ``i`` only
         after region ``i - 1`` was reached at an earlier step; ``-1`` if never reached.
     """
-    return _reach_steps(_regions_task(regions), states)
+    states = np.asarray(states, dtype=np.float64)
+    if states.ndim != 2:
+        raise ValueError(f"states must have shape (T+1, p), got {states.shape}")
+    task = _regions_task(regions)
+    task.check_state_dim(states.shape[1])
+    return _reach_steps(task, [states])[0]
 
 
 def _regions_task(regions: Sequence[Region]) -> TaskModel:
@@ -497,11 +502,30 @@ def _regions_task(regions: Sequence[Region]) -> TaskModel:
     return TaskModel(regions, [QuadraticReward(r.mean, np.zeros((p, p))) for r in regions])
 
 
-def _reach_steps(task: TaskModel, states: np.ndarray) -> np.ndarray:
-    """:func:`segment_boundaries` with a task built once for many trajectories."""
-    index = task.segment_indices(states)  # non-decreasing
-    out = np.searchsorted(index, np.arange(1, task.n_indices))
-    out[out == len(index)] = -1
+def _reach_steps(task: TaskModel, trajectories: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """:func:`segment_boundaries` of many trajectories, each region tested once on them all.
+
+    The same region tests as :meth:`~swirl_wrappers.TaskModel.segment_indices` (row by row,
+    the wrappers' arithmetic), then per trajectory the index advances at the first step, after
+    the previous advance, whose state lies in the next region.
+    """
+    lengths = [len(s) for s in trajectories]
+    x = task.featurize(np.concatenate(trajectories).astype(np.float64, copy=False))
+    steps = np.concatenate([np.arange(n) for n in lengths])
+    inside = [task.evaluate(x, steps, i)[1] for i in range(task.n_segments)]
+    cuts = np.cumsum(lengths)[:-1]
+    per_region = [np.split(hits, cuts) for hits in inside]
+    out = []
+    for d in range(len(trajectories)):
+        reached = np.full(task.n_segments, -1, dtype=np.int64)
+        t = -1
+        for i in range(task.n_segments):
+            later = np.flatnonzero(per_region[i][d][t + 1 :])
+            if not later.size:
+                break
+            t += 1 + int(later[0])
+            reached[i] = t
+        out.append(reached)
     return out
 
 
@@ -1194,7 +1218,7 @@ or callable, default "gmm"
     ) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Per demonstration, the step each region is reached at, and the switches."""
         task = _regions_task(regions)
-        segments = [_reach_steps(task, s) for s in x]
+        segments = _reach_steps(task, x)
         ends = slice(None, -1) if self.include_goal else slice(None)
         return segments, [b[ends][b[ends] > 0] for b in segments]
 
@@ -1354,8 +1378,7 @@ or callable, default "gmm"
                 return [0] * len(x)
             task = _regions_task(_make_disjoint([regions[j] for j in subset]))
             missed = []
-            for s in x:
-                b = _reach_steps(task, s)
+            for b in _reach_steps(task, x):
                 b[0] = -1 if b[0] == 0 else b[0]  # the start state never counts
                 missed.append(int(np.argmax(b < 0)) if (b < 0).any() else -1)
             return missed
@@ -1545,15 +1568,16 @@ or callable, default "gmm"
         for members, score in clusters:
             groups = [(members, score)]
             if len(members) > 1:
-                time_labels, time_proba = self._dpgmm_labels(
-                    times[members][:, None], rs.randint(_SEED_MAX)
-                )
-                sub = [
-                    (members[time_labels == u], time_proba[time_labels == u, u])
-                    for u in np.unique(time_labels)
-                ]
-                if len(sub) > 1 and all(len(np.unique(owner[m])) >= need for m, _ in sub):
-                    groups = sub
+                time_seed = rs.randint(_SEED_MAX)  # drawn even when unused: same later seeds
+                # A split needs two parts of `need` demos each, so at least 2 * need members.
+                if len(members) >= 2 * need:
+                    time_labels, time_proba = self._dpgmm_labels(times[members][:, None], time_seed)
+                    sub = [
+                        (members[time_labels == u], time_proba[time_labels == u, u])
+                        for u in np.unique(time_labels)
+                    ]
+                    if len(sub) > 1 and all(len(np.unique(owner[m])) >= need for m, _ in sub):
+                        groups = sub
             for group, group_score in groups:
                 found.append(self._representatives(group, group_score, owner, steps, points))
         found.sort(key=lambda item: float(np.median(item[0])))

@@ -21,6 +21,7 @@ from sb3_swirl.segmentation import (
     switch_scores,
     velocity_indicator,
 )
+from swirl_wrappers import QuadraticReward, Region, TaskModel
 
 
 @pytest.fixture(scope="module")
@@ -63,6 +64,29 @@ def test_segments_follow_the_markov_segmentation_function(three_phases):
             assert inside[i, b] and not inside[i, prev + 1 : b].any()
             prev = b
         np.testing.assert_array_equal(segment_boundaries(demo.observations, tsc.regions_), segs)
+
+
+def test_segment_boundaries_match_the_wrappers_segmentation_where_regions_are_missed():
+    # Random walks drifting through three regions in a row: some reach all, some miss one.
+    rng = np.random.default_rng(0)
+    regions = [
+        Region(mean=np.array([x, 0.0]), covariance=np.eye(2) * 0.5, threshold=1.0)
+        for x in (0.0, 2.0, 4.0)
+    ]
+    task = TaskModel(regions, [QuadraticReward(r.mean, np.eye(2)) for r in regions])
+    reached_all = missed_one = 0
+    for _ in range(200):
+        walk = np.cumsum(rng.normal([0.1, 0.0], 0.3, (60, 2)), axis=0) - [1.0, 0.0]
+        index = task.segment_indices(walk)
+        expected = np.searchsorted(index, np.arange(1, 4))
+        expected[expected == len(walk)] = -1
+        got = segment_boundaries(walk, regions)
+        np.testing.assert_array_equal(got, expected)
+        reached_all += bool((got >= 0).all())
+        missed_one += bool((got < 0).any())
+    assert reached_all and missed_one
+    with pytest.raises(ValueError, match="shape"):
+        segment_boundaries(np.zeros(5), regions)
 
 
 def test_regions_are_pairwise_disjoint(three_phases):
