@@ -240,12 +240,12 @@ class SwirlDQN(DQN):
     def _take_task(self, task: TaskModel | None) -> None:
         """Read the task and reward settings from the env (``get_attr``); check ``task``."""
         assert self.env is not None
+        if task is not None and not isinstance(task, TaskModel):
+            raise ValueError(f"task must be a swirl_wrappers.TaskModel, got {type(task).__name__}")
         self.task = get_swirl_attr(self.env, "task")
         self.reward_config = get_swirl_attr(self.env, "reward_config")
         self.terminate_on_completion = get_swirl_attr(self.env, "terminate_on_completion")
         self.task_json = self.task.to_json()
-        if task is not None and not isinstance(task, TaskModel):
-            raise ValueError(f"task must be a swirl_wrappers.TaskModel, got {type(task).__name__}")
         if task is not None and task.to_json() != self.task_json:
             raise ValueError("task differs from the task carried by the environment")
         if self.reward_config.potential and self.reward_config.gamma != self.gamma:

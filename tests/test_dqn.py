@@ -185,6 +185,12 @@ def test_bad_settings_fail_at_construction(kwargs, match):
         SwirlDQN("MlpPolicy", point_env(), demonstrations=point_demos(2), **kwargs)
 
 
+def test_a_task_that_is_not_a_task_model_is_named_before_the_env_is_read():
+    # A path given as the task, with an env that is not wrapped: the task is what to fix first.
+    with pytest.raises(ValueError, match=r"task must be a swirl_wrappers\.TaskModel, got str"):
+        SwirlDQN("MlpPolicy", "CartPole-v1", task="task.json")
+
+
 def test_a_model_saved_before_learning_keeps_its_demonstrations(tmp_path):
     model = SwirlDQN("MlpPolicy", point_env(), demonstrations=point_demos(2), bc_epochs=2, seed=0)
     model.save(tmp_path / "fresh.zip")
