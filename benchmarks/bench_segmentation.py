@@ -23,7 +23,8 @@ the result; ``--split tuning`` shows the former.
 
 Methods: ``default`` (our defaults: the GMM indicator, time normalised, fragments merged,
 nuisance dimensions left out where they cut transitions); ``all-dims`` (the same without
-``ignore_nuisance_dims``); ``unmerged`` (the same without ``merge_fragments``); ``auto``
+``ignore_nuisance_dims``); ``unmerged`` (the same without ``merge_fragments``);
+``same-dynamics`` (the defaults with ``merge_same_dynamics=True``); ``auto``
 (``indicator="auto"``: the best of gmm, velocity and linear by
 :func:`~sb3_swirl.segmentation.dynamics_cv_error`); ``previous`` (the defaults before this
 benchmark: region floor ``reg_covar=1e-3``, no time normalisation, no merging, every
@@ -65,6 +66,7 @@ METHODS: dict[str, dict[str, Any]] = {
     "auto": {"indicator": "auto"},
     "all-dims": {"ignore_nuisance_dims": False},  # the defaults before nuisance dims
     "unmerged": {"merge_fragments": False},
+    "same-dynamics": {"merge_same_dynamics": True},
     "previous": {
         "reg_covar": 1e-3,
         "normalize_time": False,

@@ -111,6 +111,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         segmentation["merge_fragments"] = False
     if args.cluster_all_dims:
         segmentation["ignore_nuisance_dims"] = False
+    if args.merge_same_dynamics:
+        segmentation["merge_same_dynamics"] = True
     reward = {"metric": args.metric}
     with console.status(f"fitting SWIRL on {len(demos)} demos...") as status:
         task = fit_task(
@@ -145,6 +147,17 @@ def _print_task(task) -> None:
             f"transition states clustered without task-space dims {ignored}: they move on "
             "their own in each demo and cut transitions into fragments (--cluster-all-dims "
             "to use them)"
+        )
+    merged = [
+        d
+        for d in task.metadata.get("dropped_regions", [])
+        if "merge_same_dynamics=True" in d["reason"]
+    ]
+    if merged:
+        steps = ", ".join(f"{d['time']:.0f}" for d in merged)
+        console.print(
+            f"dropped {len(merged)} region(s) (near steps {steps}): the segments on either "
+            "side follow the same locally linear dynamics (--merge-same-dynamics)"
         )
     table = Table(
         title=f"SWIRL proxy task: {task.n_segments} segments",
@@ -289,6 +302,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="cluster transition states on every dimension, also those that move on their "
         "own in each demo (by default left out where they cut transitions into fragments)",
+    )
+    p.add_argument(
+        "--merge-same-dynamics",
+        action="store_true",
+        help="drop each transition region without which the demos are explained as locally "
+        "linear dynamics as well (cuts where the motion only slows down within a phase)",
     )
     p.add_argument("--metric", default="mahalanobis", choices=["mahalanobis", "euclidean"])
     p.add_argument(

@@ -904,6 +904,18 @@ or callable, default "gmm"
         That second fit is kept only if it ends with more regions. ``indicator="auto"`` also
         scores its candidates without those dimensions. Chosen by
         ``benchmarks/bench_segmentation.py`` (README).
+    merge_same_dynamics : bool, default False
+        After pruning, drop each transition region (greedily, the best first) without which
+        the demonstrations are explained as locally linear dynamics at least as well
+        (:func:`dynamics_cv_error` not higher, on the dimensions the demonstrations share:
+        see ``ignore_nuisance_dims``). A state-clustering indicator also cuts where the motion
+        slows down within one phase, as it does on approaching a sub-goal; the dynamics
+        there are the same on both sides. On the synthetic benchmark it raised the
+        defaults' held-out mean switch F1 from 0.81 to 0.85 and lowered none of the 28
+        generators' medians, but it changes the fits of our own tasks (the acrobot's
+        swing-up phases, parking's, Fetch pick-and-place's down to one segment), where the
+        agents were not measured with it, so it is off by default (README, "Choosing a
+        transition indicator"). Dropped regions are recorded in ``dropped_regions_``.
     confidence : float, default 0.95
         Chi-square confidence level of the region ellipsoids (before shrinking for
         disjointness).
@@ -1006,6 +1018,7 @@ or callable, default "gmm"
         "min_demo_fraction": [Interval(Real, 0, 1, closed="right")],
         "merge_fragments": ["boolean"],
         "ignore_nuisance_dims": ["boolean"],
+        "merge_same_dynamics": ["boolean"],
         "confidence": [Interval(Real, 0, 1, closed="neither")],
         "covariance_type": [StrOptions({"diag", "tied", "spherical", "full"})],
         "reg_covar": [_POSITIVE],
@@ -1030,6 +1043,7 @@ or callable, default "gmm"
         min_demo_fraction: float = 1.0,
         merge_fragments: bool = True,
         ignore_nuisance_dims: bool = True,
+        merge_same_dynamics: bool = False,
         confidence: float = 0.95,
         covariance_type: str = "diag",
         reg_covar: float = 1e-4,
@@ -1051,6 +1065,7 @@ or callable, default "gmm"
         self.min_demo_fraction = min_demo_fraction
         self.merge_fragments = merge_fragments
         self.ignore_nuisance_dims = ignore_nuisance_dims
+        self.merge_same_dynamics = merge_same_dynamics
         self.confidence = confidence
         self.covariance_type = covariance_type
         self.reg_covar = reg_covar
@@ -1209,9 +1224,39 @@ or callable, default "gmm"
             )
         self.regions_ = _make_disjoint([regions[i] for i in kept])
         self.region_transitions_ = [members[i] for i in kept]
+        if self.merge_same_dynamics:
+            self._merge_same_dynamics(x)
         self.segments_, self.switches_ = self._segmentation(x, self.regions_)
         self._check_complete(self.segments_)
         return self
+
+    def _merge_same_dynamics(self, x: list[np.ndarray]) -> None:
+        """Drop transition regions (greedily) whose removal does not raise the dynamics error."""
+        shared = _shared_course_dims(x)
+        on_shared = x if shared is None else [s[:, shared] for s in x]
+        regions, members = list(self.regions_), list(self.region_transitions_)
+
+        def error(kept: list[Region]) -> float:
+            switches = self._segmentation(x, _make_disjoint(kept))[1]
+            return dynamics_cv_error(on_shared, switches, self.time_scale_)
+
+        current = error(regions)
+        removable = len(regions) - (1 if self.include_goal else 0)
+        while removable > 0:
+            best, k = min((error(regions[:k] + regions[k + 1 :]), k) for k in range(removable))
+            if best > current:
+                break
+            self._drop(
+                np.array([step for _, step in members[k]], dtype=np.float64),
+                regions[k].mean,
+                "the segments on either side follow the same locally linear dynamics "
+                f"(dynamics error {best:.4g} without it, {current:.4g} with it; "
+                "merge_same_dynamics=True)",
+            )
+            del regions[k], members[k]
+            current, removable = best, removable - 1
+        if len(regions) < len(self.regions_):
+            self.regions_, self.region_transitions_ = _make_disjoint(regions), members
 
     def _segmentation(
         self, x: list[np.ndarray], regions: list[Region]
@@ -1277,6 +1322,7 @@ or callable, default "gmm"
                 "'ruptures' needs the ruptures package)"
             )
         merge = "" if self.merge_fragments else ", merge_fragments=True"
+        merge += ", merge_same_dynamics=False" if self.merge_same_dynamics else ""
         advice = (
             f"{other}, a longer window{merge}, or a lower min_demo_fraction, and look at "
             "`sb3-swirl show --plot` with the demos"

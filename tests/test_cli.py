@@ -88,6 +88,26 @@ def test_fit_flags_turn_off_nuisance_dims_and_merging(tmp_path, capsys):
     assert "without task-space dims [3, 4, 5]" in capsys.readouterr().err
 
 
+def test_fit_merge_same_dynamics_flag_drops_cuts_within_a_phase(tmp_path, capsys):
+    from sb3_swirl.datasets import make_switching_demos
+    from sb3_swirl.demos import save_demos
+
+    # goal reaching in 16 dims: the GMM also cuts where the motion slows (test_segmentation.py)
+    demos, _ = make_switching_demos("goal_reaching", dim=16, random_state=0)
+    path = tmp_path / "demos.npz"
+    save_demos(demos, path)
+    segments = []
+    for flags in ((), ("--merge-same-dynamics",)):
+        task_path = tmp_path / f"task{len(flags)}.json"
+        assert main(["fit", str(path), "-o", str(task_path), *flags]) == 0
+        task = TaskModel.from_json(task_path)
+        assert task.metadata["segmentation"]["params"]["merge_same_dynamics"] is bool(flags)
+        segments.append(task.n_segments)
+        said = " ".join(capsys.readouterr().err.split())  # rich wraps lines
+        assert ("follow the same locally linear dynamics" in said) is bool(flags)
+    assert segments == [5, 3]  # the truth: 3 phases
+
+
 def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
     assert main(["fit", str(tmp_path / "missing.npz"), "-o", str(tmp_path / "t.json")]) == 2
     assert "missing.npz" in capsys.readouterr().err

@@ -483,6 +483,26 @@ def test_nuisance_dims_are_left_out_of_clustering_where_they_fragment_transition
     assert all(a >= b for a, b in zip(n_regions[True], n_regions[False], strict=True))
 
 
+def test_merge_same_dynamics_drops_cuts_within_a_phase_and_keeps_the_true_ones():
+    # goal reaching in 16 dims: the GMM also cuts where the motion slows towards a sub-goal,
+    # where the dynamics are the same on both sides
+    for seed in (0, 2):
+        demos, switches = make_switching_demos("goal_reaching", dim=16, random_state=seed)
+        plain, f1_plain = _fit_and_score(demos, switches)
+        merged, f1_merged = _fit_and_score(demos, switches, merge_same_dynamics=True)
+        # measured: 5 -> 3 and 4 -> 3 regions, F1 0.67 -> 1.00 and 0.80 -> 1.00
+        assert len(merged.regions_) < len(plain.regions_)
+        assert f1_merged > f1_plain
+        same = [d for d in merged.dropped_regions_ if "same locally linear" in d["reason"]]
+        assert len(same) == len(plain.regions_) - len(merged.regions_)
+    # where every cut changes the dynamics, nothing is dropped
+    demos, switches = make_switching_demos("constant_velocity", random_state=0)
+    plain, _ = _fit_and_score(demos, switches)
+    merged, f1 = _fit_and_score(demos, switches, merge_same_dynamics=True)
+    assert f1 == 1.0 and len(merged.regions_) == len(plain.regions_)
+    assert not TransitionStateClustering().merge_same_dynamics  # opt-in
+
+
 def test_shared_course_dims_only_splits_when_some_dims_clearly_follow_a_shared_course():
     from sb3_swirl.segmentation import _shared_course_dims
 
