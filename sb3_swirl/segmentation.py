@@ -836,7 +836,9 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
        greedily until ``ceil(min_demo_fraction * n_demos)`` demonstrations reach every region
        in order, the first one after their start state (a demonstration may pass through a
        region before the previous one, e.g. a place on a growing oscillation, or start inside
-       it). ``segments_`` runs the resulting segmentation along every demonstration.
+       it). With ``merge_same_dynamics``, transition regions the locally linear dynamics do
+       not need are then dropped too. ``segments_`` runs the resulting segmentation along
+       every demonstration.
 
     States holding wrapped angles need continuous features first (a region straddling
     ``±pi`` is meaningless): :func:`sb3_swirl.fitting.fit_task` maps them to ``(cos, sin)`` with
