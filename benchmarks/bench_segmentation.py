@@ -166,6 +166,7 @@ def summarise(rows: list[dict[str, Any]], methods: list[str]) -> None:
             cells.append(f"{statistics.median(f1):.2f} ({min(f1):.2f})")
         print(f"{gen:<{width}} " + " ".join(f"{c:>15}" for c in cells))
     print("\noverall, per method")
+    name_width = max(len(m) for m in methods)
     for m in methods:
         mine = [r for r in rows if r["method"] == m]
         f1 = [r["f1"] for r in mine]
@@ -175,7 +176,8 @@ def summarise(rows: list[dict[str, Any]], methods: list[str]) -> None:
         )
         seconds = [r["seconds"] for r in mine]
         print(
-            f"  {m:<12} median F1 {statistics.median(f1):.3f}, mean {statistics.mean(f1):.3f}, "
+            f"  {m:<{name_width}} median F1 {statistics.median(f1):.3f}, "
+            f"mean {statistics.mean(f1):.3f}, "
             f"worst generator (median) {min(medians):.2f}, "
             f"sets with segments = truth {sum(r['segments'] == r['true_segments'] for r in mine)}"
             f"/{len(mine)}, silent collapses {silent}, "
