@@ -248,6 +248,7 @@ def run_method(
 
     from sb3_swirl.experiments import (
         _swirl_spec,
+        _swirl_wrapper_kwargs,
         load_hyperparams,
         rollouts_to_success,
         train_and_evaluate,
@@ -312,14 +313,14 @@ def run_method(
         spec = _swirl_spec(swirl)
         if method == "qinit":  # the true reward alone, BC start and SwirlDQN's settings
             learner, hyperparams, clone = QuadraticRewardLearner(), swirl, demos
-            wrapper = {
-                "reward_config": {"mode": "potential", "scale": 0.0, "task_reward_weight": 1.0}
-            }
+            reward_config = {"mode": "potential", "scale": 0.0, "task_reward_weight": 1.0}
         else:  # the IRL reward, then plain DQN's settings
             dynamics = known_model() if method == "global_irl_model" else None
             learner, clone = MaxEntIRLRewardLearner(dynamics=dynamics), None
             hyperparams = load_hyperparams("dqn", preset.env_id)
-            wrapper = {"reward_config": spec.get("reward_config", {})}
+            reward_config = spec.get("reward_config", {})
+        # the entry's other wrapper settings (a Dict observation's state_key) stay
+        wrapper = {**_swirl_wrapper_kwargs(swirl), "reward_config": reward_config}
         hyperparams = {
             **hyperparams,
             "env_wrapper": [{"sb3_swirl.zoo.SwirlTaskWrapper": wrapper}],

@@ -367,7 +367,7 @@ def test_swirl_dqn_learns_fetch_reach_within_a_small_budget():
     assert result["n_segments"] == fit_task(demos, random_state=0, **preset.fit_kwargs).n_segments
 
 
-def test_dqn_her_and_bc_run_on_fetch_reach():
+def test_comparison_methods_run_on_fetch():
     preset = dataclasses.replace(PRESETS["fetchreach"], eval_freq=250, n_eval_episodes=2)
     demos = collect_demos(
         preset.env_id, 3, seed=0, state_key=preset.state_key, **preset.demo_env_kwargs
@@ -380,6 +380,10 @@ def test_dqn_her_and_bc_run_on_fetch_reach():
     pushes = collect_demos(push.env_id, 3, seed=0, state_key=push.state_key, **push.demo_env_kwargs)
     swirl_her = run_method("swirl_her", push, pushes, seed=0, total_timesteps=300)
     assert swirl_her["curve"][-1]["timesteps"] >= 300 and swirl_her["n_segments"] >= 1
+    # the one-segment methods keep the entry's state_key (a Dict observation)
+    for method in ("qinit", "global_irl"):
+        result = run_method(method, push, pushes, seed=0, total_timesteps=300)
+        assert result["curve"][-1]["timesteps"] >= 300, method
     bc = run_method("bc_rbf_svm", preset, demos, seed=0, total_timesteps=300)
     assert bc["curve"][-1]["timesteps"] == 0 and 0.0 <= bc["final_success"] <= 1.0
 
