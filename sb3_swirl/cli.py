@@ -266,7 +266,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demos", help="generate supervisor demonstrations of a shipped env")
     p.add_argument("env_id", help="e.g. sb3_swirl/ParallelParking-v0")
     p.add_argument("-n", type=int, default=5, help="number of demos (default 5)")
-    p.add_argument("--seed", type=_seed, default=0)
+    p.add_argument(
+        "--seed", type=_seed, default=0, help="seeds the episodes and the supervisor (default 0)"
+    )
     p.add_argument("-o", "--output", required=True, help="output .npz file")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_demos)
@@ -274,7 +276,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("fit", help="fit a SWIRL proxy task to demonstrations")
     p.add_argument("demos", help=".npz file of demonstrations (see `sb3-swirl demos`)")
     p.add_argument("-o", "--output", required=True, help="output task JSON")
-    p.add_argument("--seed", type=_seed, default=0)
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the fit (default 0)")
     p.add_argument(
         "--indicator",
         default="gmm",
@@ -283,7 +285,13 @@ def build_parser() -> argparse.ArgumentParser:
         "the ruptures package), or several joined by '+'",
     )
     p.add_argument("--window", type=int, default=None, help="window length of the indicator")
-    p.add_argument("--min-demo-fraction", type=float, default=None)
+    p.add_argument(
+        "--min-demo-fraction",
+        type=float,
+        default=None,
+        help="keep a transition region shared by at least this fraction of the demos "
+        "(default 1.0: all, as in the paper's Algorithm 1)",
+    )
     p.add_argument(
         "--reg-covar",
         type=float,
@@ -309,7 +317,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="drop each transition region without which the demos are explained as locally "
         "linear dynamics as well (cuts where the motion only slows down within a phase)",
     )
-    p.add_argument("--metric", default="mahalanobis", choices=["mahalanobis", "euclidean"])
+    p.add_argument(
+        "--metric",
+        default="mahalanobis",
+        choices=["mahalanobis", "euclidean"],
+        help="distance of each segment's quadratic reward (default mahalanobis: weighted by "
+        "the inverse covariance of the segment's demo states)",
+    )
     p.add_argument(
         "--dims", type=_dims, help="comma-separated observation dims to use (e.g. 0,1,3)"
     )
@@ -334,8 +348,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demo", help="the main job: SWIRL vs DQN on a shipped task")
     p.add_argument("task", choices=sorted(PRESETS))
-    p.add_argument("--seed", type=_seed, default=0)
-    p.add_argument("--n-demos", type=int, default=None)
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the demos and agents")
+    p.add_argument("--n-demos", type=int, default=None, help="default: the task's (5 on parking)")
     p.add_argument("--timesteps", type=int, default=None, help="training steps per method")
     p.add_argument("--out", default="results", help="output folder (default results/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
@@ -353,7 +367,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="results", help="output folder (default results/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     p.add_argument("--jobs", type=int, default=2, help="runs at once (figures)")
-    p.add_argument("--backend", default="joblib", choices=["joblib", "ray"])
+    p.add_argument(
+        "--backend",
+        default="joblib",
+        choices=["joblib", "ray"],
+        help="where the runs go: local processes (default) or a Ray cluster "
+        "(pip install sb3-swirl[ray])",
+    )
     p.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
     p.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
     p.add_argument("--panels", nargs="+", default=None, help="a subset of a figure's panels")
