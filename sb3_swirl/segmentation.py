@@ -472,8 +472,8 @@ _BUILTIN = (gmm_indicator, velocity_indicator, linear_indicator, ruptures_indica
 def segment_boundaries(states: np.ndarray, regions: Sequence[Region]) -> np.ndarray:
     """Run the Markov segmentation function along one trajectory in task space.
 
-    The trajectory is segmented by :meth:`swirl_wrappers.TaskModel.segment_indices`, with the
-    wrappers' own arithmetic, so the fit sees the segments an agent will be given.
+    The trajectory is segmented by :meth:`swirl_wrappers.TaskModel.reach_steps`, where the
+    wrappers advance the index online, so the fit sees the segments an agent will be given.
 
     Parameters
     ----------
@@ -491,42 +491,13 @@ def segment_boundaries(states: np.ndarray, regions: Sequence[Region]) -> np.ndar
     states = np.asarray(states, dtype=np.float64)
     if states.ndim != 2:
         raise ValueError(f"states must have shape (T+1, p), got {states.shape}")
-    task = _regions_task(regions)
-    task.check_state_dim(states.shape[1])
-    return _reach_steps(task, [states])[0]
+    return _regions_task(regions).reach_steps([states])[0]
 
 
 def _regions_task(regions: Sequence[Region]) -> TaskModel:
     """A task of the regions alone (its rewards are never read), to segment with."""
     p = regions[0].mean.size
     return TaskModel(regions, [QuadraticReward(r.mean, np.zeros((p, p))) for r in regions])
-
-
-def _reach_steps(task: TaskModel, trajectories: Sequence[np.ndarray]) -> list[np.ndarray]:
-    """:func:`segment_boundaries` of many trajectories, each region tested once on them all.
-
-    The same region tests as :meth:`~swirl_wrappers.TaskModel.segment_indices` (row by row,
-    the wrappers' arithmetic), then per trajectory the index advances at the first step, after
-    the previous advance, whose state lies in the next region.
-    """
-    lengths = [len(s) for s in trajectories]
-    x = task.featurize(np.concatenate(trajectories).astype(np.float64, copy=False))
-    steps = np.concatenate([np.arange(n) for n in lengths])
-    inside = [task.evaluate(x, steps, i)[1] for i in range(task.n_segments)]
-    cuts = np.cumsum(lengths)[:-1]
-    per_region = [np.split(hits, cuts) for hits in inside]
-    out = []
-    for d in range(len(trajectories)):
-        reached = np.full(task.n_segments, -1, dtype=np.int64)
-        t = -1
-        for i in range(task.n_segments):
-            later = np.flatnonzero(per_region[i][d][t + 1 :])
-            if not later.size:
-                break
-            t += 1 + int(later[0])
-            reached[i] = t
-        out.append(reached)
-    return out
 
 
 def _separation_scale(a: Region, b: Region) -> float:
@@ -1265,7 +1236,7 @@ or callable, default "gmm"
     ) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Per demonstration, the step each region is reached at, and the switches."""
         task = _regions_task(regions)
-        segments = _reach_steps(task, x)
+        segments = task.reach_steps(x)
         ends = slice(None, -1) if self.include_goal else slice(None)
         return segments, [b[ends][b[ends] > 0] for b in segments]
 
@@ -1426,7 +1397,7 @@ or callable, default "gmm"
                 return [0] * len(x)
             task = _regions_task(_make_disjoint([regions[j] for j in subset]))
             missed = []
-            for b in _reach_steps(task, x):
+            for b in task.reach_steps(x):
                 b[0] = -1 if b[0] == 0 else b[0]  # the start state never counts
                 missed.append(int(np.argmax(b < 0)) if (b < 0).any() else -1)
             return missed

@@ -66,7 +66,7 @@ def test_segments_follow_the_markov_segmentation_function(three_phases):
         np.testing.assert_array_equal(segment_boundaries(demo.observations, tsc.regions_), segs)
 
 
-def test_segment_boundaries_match_the_wrappers_segmentation_where_regions_are_missed():
+def test_segment_boundaries_match_the_wrappers_online_segmentation_where_regions_are_missed():
     # Random walks drifting through three regions in a row: some reach all, some miss one.
     rng = np.random.default_rng(0)
     regions = [
@@ -74,19 +74,35 @@ def test_segment_boundaries_match_the_wrappers_segmentation_where_regions_are_mi
         for x in (0.0, 2.0, 4.0)
     ]
     task = TaskModel(regions, [QuadraticReward(r.mean, np.eye(2)) for r in regions])
+    walks = [
+        np.cumsum(rng.normal([0.1, 0.0], 0.3, (60, 2)), axis=0) - [1.0, 0.0] for _ in range(200)
+    ]
+    batched = task.reach_steps(walks)
     reached_all = missed_one = 0
-    for _ in range(200):
-        walk = np.cumsum(rng.normal([0.1, 0.0], 0.3, (60, 2)), axis=0) - [1.0, 0.0]
-        index = task.segment_indices(walk)
-        expected = np.searchsorted(index, np.arange(1, 4))
+    for walk, together in zip(walks, batched, strict=True):
+        # the reference: the index advanced online, one observation at a time
+        online, i = [], 0
+        for t, obs in enumerate(walk):
+            i = int(task.next_segment(obs, t, i))
+            online.append(i)
+        np.testing.assert_array_equal(task.segment_indices(walk), online)
+        expected = np.searchsorted(online, np.arange(1, 4))
         expected[expected == len(walk)] = -1
         got = segment_boundaries(walk, regions)
         np.testing.assert_array_equal(got, expected)
+        np.testing.assert_array_equal(together, expected)
         reached_all += bool((got >= 0).all())
         missed_one += bool((got < 0).any())
     assert reached_all and missed_one
+    assert task.reach_steps([]) == []
+    # one region per step, also where regions overlap: a state in both advances the index once
+    twice = TaskModel(regions[:1] * 2, [QuadraticReward(np.zeros(2), np.eye(2))] * 2)
+    np.testing.assert_array_equal(twice.reach_steps([np.zeros((3, 2))])[0], [0, 1])
+    np.testing.assert_array_equal(twice.segment_indices(np.zeros((3, 2))), [1, 2, 2])
     with pytest.raises(ValueError, match="shape"):
         segment_boundaries(np.zeros(5), regions)
+    with pytest.raises(ValueError, match=r"trajectory 1: .*shape"):
+        task.reach_steps([walks[0], np.zeros(5)])
 
 
 def test_regions_are_pairwise_disjoint(three_phases):

@@ -32,7 +32,7 @@ import json
 import math
 import numbers
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -801,16 +801,54 @@ class TaskModel:
         x = np.asarray(observations, dtype=np.float64)
         if x.ndim != 2:
             raise ValueError(f"observations must have shape (T+1, obs_dim), got {x.shape}")
-        self.check_state_dim(x.shape[-1])
-        x = self.featurize(x)
-        steps = np.arange(len(x))
-        inside = [self.evaluate(x, steps, i)[1].tolist() for i in range(self.n_segments)]
+        reached = self.reach_steps([x])[0]
         out = np.zeros(len(x), dtype=np.int64)
-        i = 0
-        for t in range(len(x)):
-            if i < self.n_segments and inside[i][t]:
-                i += 1
-            out[t] = i
+        for step in reached[reached >= 0]:
+            out[step:] += 1
+        return out
+
+    def reach_steps(self, trajectories: Sequence[np.ndarray]) -> list[np.ndarray]:
+        """The step at which each region is reached, along many trajectories at once.
+
+        Parameters
+        ----------
+        trajectories : sequence of arrays of shape (T+1, obs_dim)
+            Observations at steps ``0 .. T`` (the start state first).
+
+        Returns
+        -------
+        list of int arrays of shape (n_segments,)
+            Per trajectory, ``out[i]`` is the first step after region ``i - 1``'s whose state
+            lies in region ``i`` (region 0: from the start state on), ``-1`` once a region is
+            never reached: where :meth:`segment_indices` and the wrappers advance the index.
+            Each region is tested once on all the trajectories stacked, with the wrappers'
+            row-by-row arithmetic.
+        """
+        xs = [np.asarray(o, dtype=np.float64) for o in trajectories]
+        for k, x in enumerate(xs):
+            if x.ndim != 2:
+                raise ValueError(
+                    f"trajectory {k}: observations must have shape (T+1, obs_dim), got {x.shape}"
+                )
+            self.check_state_dim(x.shape[-1])
+        if not xs:
+            return []
+        lengths = [len(x) for x in xs]
+        x = self.featurize(np.concatenate(xs))
+        steps = np.concatenate([np.arange(n) for n in lengths])
+        cuts = np.cumsum(lengths)[:-1]
+        inside = [np.split(self.evaluate(x, steps, i)[1], cuts) for i in range(self.n_segments)]
+        out = []
+        for d in range(len(xs)):
+            reached = np.full(self.n_segments, -1, dtype=np.int64)
+            t = -1
+            for i in range(self.n_segments):
+                later = np.flatnonzero(inside[i][d][t + 1 :])
+                if not later.size:
+                    break
+                t += 1 + int(later[0])
+                reached[i] = t
+            out.append(reached)
         return out
 
     # ------------------------------------------------------------------ serialisation
