@@ -903,8 +903,9 @@ or callable, default "gmm"
         makes regions of slow approaches too wide). With very few demos a region
         rests on one point per demo, which can agree along an axis far more than new episodes
         will: for reinforcement learning raise it (e.g. to 0.1) so that new start states
-        still enter the regions (the parking, dVRK tensioning and Fetch pick-and-place entries
-        of ``zoo_configs/swirl_dqn.yml`` train with 0.1: agents did better with it there).
+        still enter the regions (the parking, dVRK tensioning, Fetch push and pick-and-place
+        entries of ``zoo_configs/swirl_dqn.yml`` train with 0.1: agents did better with it
+        there).
     use_time : bool, default False
         Give each region a time window (the range of its transition times, widened on each
         side by that range or ``window`` steps, whichever is larger). Off by default: an RL
