@@ -775,7 +775,7 @@ def reproduce_table2(
 ) -> dict[str, Any]:
     """The paper's Table 2 on ``DVRKLineCutting-v0``: SWIRL vs an SVM clone on curved lines.
 
-    Per seed: 5 supervisor demos on straight lines at random positions (``line_jitter=1``);
+    Per seed: 5 supervisor demos on straight lines at random positions (``line_jitter=3``);
     SWIRL's fit on them; an RBF-kernel SVM clone of them (the paper's SVM baseline); then for
     every test line (straight, and arcs of radius 4.0 to 1.5 cm) SwirlDQN from the demos with
     25 episodes of exploration on that line, and both policies scored on the same greedy

@@ -7,6 +7,7 @@ import numpy as np
 
 from sb3_swirl.envs.dvrk.line_cutting import _DIRECTIONS, PLUS_X, DVRKLineCuttingEnv
 from sb3_swirl.supervisors._shared import controlled_env, step_towards
+from swirl_wrappers._validation import check_int, check_real
 
 #: The supervisor's phases: move to the line's start, then follow the line.
 POSITION, FOLLOW = range(2)
@@ -19,19 +20,32 @@ class LineCuttingSupervisor:
     the arm by hand knows) and the line's geometry. The arm trails its commands by a few
     millimetres, so it first lines up ``approach`` behind the start, on the line's extension
     (across the line first, then along it), then moves in along the line; following steps
-    towards the point of the line ``lookahead`` ahead of the tool's nearest point. It is
-    deterministic: demos differ by their starts and lines.
+    towards the point of the line ``lookahead`` ahead of the tool's nearest point.
+
+    A hand that moves the arm is not exact: while following, at each step on the line (within
+    ``slack``) the hand slips with probability ``slip``, 1 to ``max_slip`` steps across the line
+    to a random side, and once the tool is more than ``slack`` off the line the next steps take
+    it back. These corrections are what a clone of straight-line demos learns
+    to follow an arc from: where the line bends away, step back towards it (with the env's
+    signed offset, which says on which side the line is). Positioning is deterministic, one
+    action per place, which a clone can learn.
 
     Parameters
     ----------
     env : DVRKLineCuttingEnv
         The environment to control (wrappers are looked through with ``env.unwrapped``).
     seed : int, optional
-        Unused (taken like the other supervisors' seeds).
+        Seeds the slips.
     lookahead : float, default 0.004
         How far ahead along the line (m) the follower aims.
     approach : float, default 0.012
         Length (m) of the straight run-in to the line's start.
+    slip : float, default 0.15
+        Probability that a step of the cut on the line starts a slip (0: none).
+    slack : float, default 0.0015
+        Distance from the line (m) beyond which the follower steps back to it.
+    max_slip : int, default 3
+        The longest slip, in steps (a slip's length is drawn uniformly from 1 to this).
 
     Examples
     --------
@@ -55,11 +69,20 @@ class LineCuttingSupervisor:
         seed: int | None = None,
         lookahead: float = 0.004,
         approach: float = 0.012,
+        slip: float = 0.15,
+        slack: float = 0.0015,
+        max_slip: int = 3,
     ) -> None:
         self.env = controlled_env(env, DVRKLineCuttingEnv, "LineCuttingSupervisor")
         self.lookahead = lookahead
         self.approach = approach
+        self.slip = check_real("slip", slip, low=0.0, high=1.0)
+        self.slack = check_real("slack", slack, low=0.0)
+        self.max_slip = check_int("max_slip", max_slip, low=1)
+        self._rng = np.random.default_rng(seed)
         self._stage = 0
+        self._slipping = 0
+        self._slip_action = PLUS_X
 
     @property
     def phase(self) -> int:
@@ -68,6 +91,7 @@ class LineCuttingSupervisor:
 
     def reset(self, obs: np.ndarray) -> None:
         self._stage = 0
+        self._slipping = 0
 
     def act(self, obs: np.ndarray) -> int:
         env = self.env
@@ -92,7 +116,19 @@ class LineCuttingSupervisor:
             if action is not None:
                 return action
             self._stage = 2
-        _, s = env.line_distance(here)
+        d, s = env.line_distance(here)
+        if not self._slipping and d <= self.slack and self._rng.random() < self.slip:
+            ahead = env.point_along(s + self.lookahead) - env.point_along(s)
+            across = np.array([-ahead[1], ahead[0]]) * self._rng.choice([1.0, -1.0])
+            self._slipping = int(self._rng.integers(1, self.max_slip + 1))
+            self._slip_action = int(np.argmax(_DIRECTIONS @ across))  # the hand slips across
+        if self._slipping:
+            self._slipping -= 1
+            return self._slip_action
+        if d > self.slack:  # back to the line
+            action = self._step_towards(env.point_along(s) - here)
+            if action is not None:
+                return action
         target = env.point_along(s + self.lookahead)
         action = self._step_towards(target - here)
         return PLUS_X if action is None else action

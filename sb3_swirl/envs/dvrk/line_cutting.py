@@ -28,9 +28,9 @@ def line_points(radius: float | None, length: float, n: int = 200) -> np.ndarray
     return np.stack([radius * np.sin(angle), radius * (1.0 - np.cos(angle))], axis=1)
 
 
-def distance_to_polyline(point: np.ndarray, points: np.ndarray) -> tuple[float, float]:
-    """Distance from ``point`` (2,) to the polyline ``points`` (n, 2) and the arc length of
-    its nearest point (both in the units of the inputs)."""
+def _nearest_on_polyline(point: np.ndarray, points: np.ndarray) -> tuple[float, float, int, float]:
+    """Distance from ``point`` to the polyline, the arc length of its nearest point, the index
+    of the piece that holds it and where on that piece (0 at its start, 1 at its end)."""
     a, b = points[:-1], points[1:]
     ab = b - a
     seg_len2 = np.einsum("ij,ij->i", ab, ab)
@@ -39,7 +39,31 @@ def distance_to_polyline(point: np.ndarray, points: np.ndarray) -> tuple[float, 
     dist = np.linalg.norm(point - nearest, axis=1)
     i = int(np.argmin(dist))
     seg_len = np.sqrt(seg_len2)
-    return float(dist[i]), float(seg_len[:i].sum() + t[i] * seg_len[i])
+    return float(dist[i]), float(seg_len[:i].sum() + t[i] * seg_len[i]), i, float(t[i])
+
+
+def distance_to_polyline(point: np.ndarray, points: np.ndarray) -> tuple[float, float]:
+    """Distance from ``point`` (2,) to the polyline ``points`` (n, 2) and the arc length of
+    its nearest point (both in the units of the inputs)."""
+    dist, s, _, _ = _nearest_on_polyline(point, points)
+    return dist, s
+
+
+def signed_offset(point: np.ndarray, points: np.ndarray) -> float:
+    """Signed offset of ``point`` (2,) from the polyline ``points`` (n, 2): positive on the
+    left of its direction (the +y side of a line heading along +x).
+
+    Beside the line it is the distance with that sign; before the line's start or past its end
+    it is the offset across the line's extension there (the straight line through that end, along
+    the end's direction), so it is 0 wherever the tool is lined up with the line.
+    """
+    dist, _, i, t = _nearest_on_polyline(point, points)
+    a, b = points[i], points[i + 1]
+    tangent = (b - a) / np.linalg.norm(b - a)
+    across = float(tangent[0] * (point[1] - a[1]) - tangent[1] * (point[0] - a[0]))
+    if (i == 0 and t == 0.0) or (i == len(points) - 2 and t == 1.0):
+        return across
+    return float(np.copysign(dist, across))
 
 
 def _build_task(base: type) -> type:
@@ -103,8 +127,14 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
     ======  =======  =============================
 
     **Observation** ``(x, y, d)`` in centimetres (float32): the tool's position relative to the
-    table centre and its distance to the marked line — the paper's *pix* feature, computed
-    exactly from the geometry instead of from a camera.
+    table centre and its offset from the marked line — the paper's *pix* feature, computed
+    exactly from the geometry instead of from a camera. By default ``d`` is signed, as an
+    offset seen in an image is: the distance to the line, positive on its left (the +y side of
+    a line heading along +x); before the line's start (or past its end) it is the offset across
+    the line's extension, so it is 0 wherever the tool is lined up with the line (see
+    :func:`signed_offset`). ``signed_distance=False`` gives the unsigned distance to the line
+    instead, which cannot tell a clone which way to step back to it: demos on straight lines
+    then teach nothing that follows an arc (README, Table 2).
 
     **Episode.** The tool starts at a random place 2–4 cm before the line's start and up to
     2 cm to either side. The cut begins at the first step the tool is within ``on_line``
@@ -128,6 +158,8 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
     line_jitter : float, default 0.0
         Each reset moves the line by up to this many cm along y (training lines "at random
         positions"); 0 keeps it fixed.
+    signed_distance : bool, default True
+        Observe the signed offset from the line (see above) rather than the distance to it.
     robot : str, default "Panda"
         The robosuite arm (only the Panda is supported so far).
     render_mode : {"rgb_array"}, optional
@@ -152,6 +184,7 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
         radius: float | None = None,
         line_start: tuple[float, float] = (-2.0, -1.0),
         line_jitter: float = 0.0,
+        signed_distance: bool = True,
         robot: str = "Panda",
         render_mode: str | None = None,
     ) -> None:
@@ -165,6 +198,7 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
                 f"got {line_start!r}"
             )
         self.radius = radius
+        self.signed_distance = bool(signed_distance)
         self.line_start = start / 100.0
         self.line_jitter = line_jitter / 100.0
         self._shape = line_points(None if radius is None else radius / 100.0, self.line_length)
@@ -183,7 +217,7 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
         )
         self.action_space = spaces.Discrete(4)
         self.observation_space = spaces.Box(
-            np.array([-15.0, -15.0, 0.0], dtype=np.float32),
+            np.array([-15.0, -15.0, -40.0 if self.signed_distance else 0.0], dtype=np.float32),
             np.array([15.0, 15.0, 40.0], dtype=np.float32),
             dtype=np.float32,
         )
@@ -236,7 +270,8 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
     def _observe(self) -> np.ndarray:
         xy = self.tool_position[:2]
         self._nearest = self.line_distance(xy)  # read again by _evaluate
-        return (np.array([*xy, self._nearest[0]]) * 100.0).astype(np.float32)
+        d = signed_offset(xy, self._line) if self.signed_distance else self._nearest[0]
+        return (np.array([*xy, d]) * 100.0).astype(np.float32)
 
     def _evaluate(self) -> tuple[float, bool, dict[str, Any]]:
         d, s = self._nearest
