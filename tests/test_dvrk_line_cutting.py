@@ -227,16 +227,45 @@ def _success_rate(model, env, seeds) -> float:
     return float(np.mean([greedy_infos(model, env, seed)[-1]["is_success"] for seed in seeds]))
 
 
-def test_entry_fit_makes_the_last_segment_the_cut():
+@pytest.fixture(scope="module")
+def entry_demos():
+    """The zoo entry's demos (5 straight lines spread 3 cm) on demo seed 5."""
+    from sb3_swirl.experiments import PRESETS
+
+    preset = PRESETS["linecutting"]
+    return collect_demos(ENV_ID, preset.n_demos, seed=5, **preset.demo_env_kwargs)
+
+
+def test_a_clone_of_straight_lines_follows_an_arc_with_the_signed_offset(entry_demos):
+    """The slips' corrections, seen with the signed offset, teach a clone which way to step
+    back to the line, so an SVM clone of straight-line demos follows a 3 cm arc it never saw.
+    The same demos seen with the unsigned distance (the paper's *pix* read literally) do not."""
+    from sb3_swirl.baselines import BCPolicy
+    from sb3_swirl.experiments import greedy_infos
+
+    def arc_success(demos, signed):
+        observations = np.concatenate([d.observations[:-1] for d in demos])
+        actions = np.concatenate([d.actions for d in demos])
+        clone = BCPolicy("svm", random_state=0).fit(observations, actions)
+        arc = gym.make(ENV_ID, radius=3.0, signed_distance=signed)
+        rate = np.mean([greedy_infos(clone, arc, s)[-1]["is_success"] for s in range(100, 110)])
+        arc.close()
+        return rate
+
+    unsigned_demos = collect_demos(ENV_ID, 5, seed=5, line_jitter=3.0, signed_distance=False)
+    assert [len(d.actions) for d in unsigned_demos] == [len(d.actions) for d in entry_demos]
+    assert arc_success(entry_demos, True) >= 0.6
+    assert arc_success(unsigned_demos, False) <= 0.2
+
+
+def test_entry_fit_makes_the_last_segment_the_cut(entry_demos):
     """The zoo entry fits on x and the offset from the line (the lines' y is random): the first
     segment ends where the demos have lined up with the line, before its start, and the last
     is the cut, whose reward weighs the offset most (paper §10.2)."""
     from sb3_swirl.experiments import PRESETS
     from sb3_swirl.fitting import fit_task
 
-    preset = PRESETS["linecutting"]
-    demos = collect_demos(ENV_ID, preset.n_demos, seed=5, **preset.demo_env_kwargs)
-    task = fit_task(demos, random_state=5, **preset.fit_kwargs)
+    task = fit_task(entry_demos, random_state=5, **PRESETS["linecutting"].fit_kwargs)
     assert task.n_segments == 2
     lined_up = task.regions[0].mean  # (x, offset) in cm
     assert lined_up[0] < -2.0 and abs(lined_up[1]) < 0.3, lined_up
@@ -244,7 +273,7 @@ def test_entry_fit_makes_the_last_segment_the_cut():
     assert weight[1] > 10 * weight[0], weight
 
 
-def test_swirl_pipeline_learns_to_position_and_cut():
+def test_swirl_pipeline_learns_to_position_and_cut(entry_demos):
     """Straight-line demos at random positions -> the entry's fit (two segments: line up, cut)
     -> SwirlDQN (BC start, then 2000 steps of Q-learning) cuts lines that its untrained
     network does not."""
@@ -254,7 +283,7 @@ def test_swirl_pipeline_learns_to_position_and_cut():
     from swirl_wrappers import SwirlWrapper
 
     preset = PRESETS["linecutting"]
-    demos = collect_demos(ENV_ID, preset.n_demos, seed=5, **preset.demo_env_kwargs)
+    demos = entry_demos
     task = fit_task(demos, random_state=5, **preset.fit_kwargs)
     assert task.n_segments == 2
 
