@@ -432,7 +432,10 @@ def run_demo(
     n_demos, total_timesteps : int, optional
         Override the preset's number of demos and training steps per method.
     out_dir : path
-        ``results.json``, ``learning_curve.png`` and ``segments.png`` go in ``out_dir/name``.
+        ``results.json``, ``learning_curve.png`` and ``segments.png`` go in ``out_dir/name``;
+        line cutting adds ``cut_paths.png`` and ``cut_paths_arc.png`` (SWIRL's greedy paths on
+        a straight line and, with no exploration there, on an arc of 3 cm), tensioning
+        ``sheet.png``, and the dVRK and Fetch tasks ``final_frame.png`` where EGL works.
     progress : bool
         Show progress bars.
 
@@ -491,9 +494,16 @@ def run_demo(
     pictures = ["segments.png"]
     if preset.env_id == "sb3_swirl/DVRKLineCutting-v0":
         from sb3_swirl.plotting import plot_cut_paths
+        from swirl_wrappers import SwirlWrapper
 
         plot_cut_paths(*models[0], path=out / "cut_paths.png", seed=seed)
-        pictures.append("cut_paths.png")
+        # the same policy on an arc that no demo showed (Table 2 explores 25 episodes on it)
+        hyperparams = runs[0]["hyperparams"]
+        arc = gym.make(preset.env_id, **{**(hyperparams.get("env_kwargs") or {}), "radius": 3.0})
+        arc = SwirlWrapper(arc, task, **_swirl_wrapper_kwargs(hyperparams))
+        plot_cut_paths(models[0][0], arc, path=out / "cut_paths_arc.png", seed=seed)
+        arc.close()
+        pictures += ["cut_paths.png", "cut_paths_arc.png"]
     elif preset.env_id == "sb3_swirl/DVRKTensioning-v0":
         from sb3_swirl.plotting import plot_sheet
 

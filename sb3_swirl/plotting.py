@@ -339,7 +339,8 @@ def plot_cut_paths(
     ax.set_aspect("equal")
     ax.set_xlabel("x (cm)")
     ax.set_ylabel("y (cm)")
-    ax.set_title("tool paths (greedy policy); errors: position / tracking")
+    shape = "a straight line" if base.radius is None else f"an arc of radius {base.radius:g} cm"
+    ax.set_title(f"tool paths over {shape} (greedy policy); errors: position / tracking")
     # below the plot: the paths fill the wide, flat axes, so a legend inside hides them
     fig.legend(loc="outside lower center", fontsize=8, ncol=2)
     ax.grid(alpha=0.3)
