@@ -389,6 +389,15 @@ def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path)
     _finish(fig, path)
 
 
+def _swirl_env(env_id: str, task: Any, hyperparams: dict[str, Any], **env_kwargs: Any) -> gym.Env:
+    """``env_id`` made with the entry's ``env_kwargs`` (``env_kwargs`` over them) and lifted by
+    ``SwirlWrapper`` with the entry's settings."""
+    from swirl_wrappers import SwirlWrapper
+
+    env = gym.make(env_id, **{**(hyperparams.get("env_kwargs") or {}), **env_kwargs})
+    return SwirlWrapper(env, task, **_swirl_wrapper_kwargs(hyperparams))
+
+
 def _save_final_frame(
     model: Any, preset: Preset, task: Any, hyperparams: dict[str, Any], seed: int, path: Path
 ) -> bool:
@@ -396,12 +405,8 @@ def _save_final_frame(
     with a note, where offscreen rendering is not available (it needs EGL)."""
     from matplotlib.image import imsave
 
-    from swirl_wrappers import SwirlWrapper
-
     try:
-        env_kwargs = hyperparams.get("env_kwargs") or {}
-        env = gym.make(preset.env_id, render_mode="rgb_array", **env_kwargs)
-        env = SwirlWrapper(env, task, **_swirl_wrapper_kwargs(hyperparams))
+        env = _swirl_env(preset.env_id, task, hyperparams, render_mode="rgb_array")
         greedy_infos(model, env, seed)
         picture = env.render()
         env.close()
@@ -494,13 +499,10 @@ def run_demo(
     pictures = ["segments.png"]
     if preset.env_id == "sb3_swirl/DVRKLineCutting-v0":
         from sb3_swirl.plotting import plot_cut_paths
-        from swirl_wrappers import SwirlWrapper
 
         plot_cut_paths(*models[0], path=out / "cut_paths.png", seed=seed)
         # the same policy on an arc that no demo showed (Table 2 explores 25 episodes on it)
-        hyperparams = runs[0]["hyperparams"]
-        arc = gym.make(preset.env_id, **{**(hyperparams.get("env_kwargs") or {}), "radius": 3.0})
-        arc = SwirlWrapper(arc, task, **_swirl_wrapper_kwargs(hyperparams))
+        arc = _swirl_env(preset.env_id, task, runs[0]["hyperparams"], radius=3.0)
         plot_cut_paths(models[0][0], arc, path=out / "cut_paths_arc.png", seed=seed)
         arc.close()
         pictures += ["cut_paths.png", "cut_paths_arc.png"]

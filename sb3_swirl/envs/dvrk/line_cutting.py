@@ -57,7 +57,13 @@ def signed_offset(point: np.ndarray, points: np.ndarray) -> float:
     it is the offset across the line's extension there (the straight line through that end, along
     the end's direction), so it is 0 wherever the tool is lined up with the line.
     """
-    dist, _, i, t = _nearest_on_polyline(point, points)
+    return _offset(point, points, *_nearest_on_polyline(point, points))
+
+
+def _offset(
+    point: np.ndarray, points: np.ndarray, dist: float, s: float, i: int, t: float
+) -> float:
+    """:func:`signed_offset` from the nearest point that ``_nearest_on_polyline`` found."""
     a, b = points[i], points[i + 1]
     tangent = (b - a) / np.linalg.norm(b - a)
     across = float(tangent[0] * (point[1] - a[1]) - tangent[1] * (point[0] - a[0]))
@@ -269,8 +275,9 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
 
     def _observe(self) -> np.ndarray:
         xy = self.tool_position[:2]
-        self._nearest = self.line_distance(xy)  # read again by _evaluate
-        d = signed_offset(xy, self._line) if self.signed_distance else self._nearest[0]
+        nearest = _nearest_on_polyline(np.asarray(xy, dtype=np.float64), self._line)
+        self._nearest = nearest[:2]  # distance and arc length, read again by _evaluate
+        d = _offset(xy, self._line, *nearest) if self.signed_distance else nearest[0]
         return (np.array([*xy, d]) * 100.0).astype(np.float32)
 
     def _evaluate(self) -> tuple[float, bool, dict[str, Any]]:
