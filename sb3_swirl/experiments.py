@@ -562,6 +562,7 @@ PAPER_TABLE1 = {
     "segmented_bc": -3516.0,
     "swirl": -3110.0,
     "swirl_no_bc": None,  # "success only in the first two segments", no value given
+    "supervisor": None,  # not reported
 }
 _TABLE1_LABELS = {
     "rl": "pure exploration (DQN)",
@@ -569,7 +570,23 @@ _TABLE1_LABELS = {
     "segmented_bc": "segmented demonstrations (BC per segment)",
     "swirl": "SWIRL (BC start + rollouts)",
     "swirl_no_bc": "SWIRL without the BC start",
+    "supervisor": "the demonstrator (our supervisor)",
 }
+
+
+class _OneEpisode:
+    """A supervisor as a policy with SB3's ``predict``, for one episode: it is reset on the
+    episode's first observation."""
+
+    def __init__(self, supervisor: Any) -> None:
+        self.supervisor = supervisor
+        self._started = False
+
+    def predict(self, obs: Any, deterministic: bool = True) -> tuple[int, None]:
+        if not self._started:
+            self.supervisor.reset(obs)
+            self._started = True
+        return self.supervisor.act(obs), None
 
 
 def greedy_infos(policy: Any, env: gym.Env, seed: int) -> list[dict[str, Any]]:
@@ -588,10 +605,9 @@ def greedy_infos(policy: Any, env: gym.Env, seed: int) -> list[dict[str, Any]]:
             return infos
 
 
-def _score_policy(policy: Any, env: gym.Env, seeds: list[int]) -> dict[str, float]:
-    """Greedy episodes of a tensioning policy: mean disparity value (minus the disparity summed
-    over the episode), success (flat at the end) and grasp rates."""
-    episodes = [greedy_infos(policy, env, seed) for seed in seeds]
+def _score_episodes(episodes: list[list[dict[str, Any]]]) -> dict[str, float]:
+    """Tensioning episodes (each a list of step infos): mean disparity value (minus the
+    disparity summed over the episode), success (flat at the end) and grasp rates."""
     return {
         "value": float(np.mean([-sum(i["disparity_cm2"] for i in e) for e in episodes])),
         "success_rate": float(np.mean([e[-1]["is_success"] for e in episodes])),
@@ -611,9 +627,11 @@ def reproduce_table1(
     Per seed: 15 supervisor demos; SWIRL's fit; a BC clone of the demos on the raw observation
     (``bc``) and on the lifted one (``segmented_bc``, run in the SWIRL wrapper); DQN from
     scratch (``rl``), SwirlDQN (``swirl``) and SwirlDQN without demos (``swirl_no_bc``) for the
-    same number of steps. Every method is scored on the same greedy evaluation episodes by the
-    disparity value (minus the disparity in cm² summed over the 100 steps; the paper's units
-    are not given, so only ratios compare). Writes ``out_dir/table1/results.json``.
+    same number of steps; and the supervisor that made the demos (``supervisor``, seeded with
+    each episode's seed), the demonstrator's own score. Every method is scored on the same
+    greedy evaluation episodes by the disparity value (minus the disparity in cm² summed over
+    the 100 steps; the paper's units are not given, so only ratios compare). Writes
+    ``out_dir/table1/results.json``.
 
     Parameters
     ----------
@@ -625,7 +643,7 @@ def reproduce_table1(
     """
     from sb3_swirl.baselines import BCPolicy, lifted_demos
     from sb3_swirl.fitting import fit_task
-    from sb3_swirl.supervisors import collect_demos
+    from sb3_swirl.supervisors import TensioningSupervisor, collect_demos
     from swirl_wrappers import SwirlWrapper
 
     base = PRESETS["tensioning"]
@@ -660,7 +678,13 @@ def reproduce_table1(
             ),
         }
         for name, (policy, score_env) in clones.items():
-            runs[name].append({"seed": seed} | _score_policy(policy, score_env, eval_seeds))
+            episodes = [greedy_infos(policy, score_env, s) for s in eval_seeds]
+            runs[name].append({"seed": seed} | _score_episodes(episodes))
+        episodes = [
+            greedy_infos(_OneEpisode(TensioningSupervisor(env.unwrapped, seed=s)), env, s)
+            for s in eval_seeds
+        ]
+        runs["supervisor"].append({"seed": seed} | _score_episodes(episodes))
         learners = {
             "rl": ("dqn", None, None),
             "swirl": ("swirl_dqn", demos, None),
@@ -689,7 +713,8 @@ def reproduce_table1(
                 hyperparams=hyperparams,
                 keep_model=True,
             )
-            scored = _score_policy(run["model"], run["eval_env"], eval_seeds)
+            episodes = [greedy_infos(run["model"], run["eval_env"], s) for s in eval_seeds]
+            scored = _score_episodes(episodes)
             runs[name].append({"seed": seed, "wall_time_s": run["wall_time_s"]} | scored)
         env.close()
         lifted_env.close()
