@@ -103,6 +103,7 @@ _ZOO_ONLY_KEYS = {
     "normalize",
     "frame_stack",
     "callback",
+    "monitor_kwargs",  # the zoo's monitor file only
 }
 
 

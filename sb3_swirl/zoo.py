@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import difflib
+import importlib
 import inspect
 import json
 import os
@@ -365,7 +366,8 @@ def check_config(
 ) -> dict[str, Any]:
     """Check the rl_zoo3 entry for ``env_id`` in ``config`` before anything trains.
 
-    Unknown keys (neither rl_zoo3's nor the algorithm's), unknown ``SwirlTaskWrapper`` keys,
+    An unregistered ``env_id``, unknown keys (neither rl_zoo3's nor the algorithm's), unknown
+    ``SwirlTaskWrapper`` keys,
     missing demo or task files and demos that do not match the env fail with a message naming
     the file, the entry and the key. The SWIRL task is fitted here (and cached for the run).
 
@@ -376,6 +378,14 @@ def check_config(
     """
     from rl_zoo3.utils import ALGOS
 
+    try:
+        gym.spec(env_id)
+    except gym.error.Error as exc:
+        close = difflib.get_close_matches(env_id, list(gym.registry), n=1)
+        hint = f"Did you mean {close[0]!r}? Or register it" if close else "Register it"
+        raise ValueError(
+            f"{exc} {hint}: pass --gym-packages with the module that registers it"
+        ) from None
     path = os.fspath(config)
     if not path.endswith((".yml", ".yaml")):
         return {}  # a .py or module config: rl_zoo3 reads it, nothing to check here
@@ -456,6 +466,11 @@ def _train(argv: list[str]) -> int:
         print(f"sb3-swirl: hyperparameters from {config}", flush=True)
     if config is not None and algo in ALGOS:
         try:
+            for module in _gym_packages(argv):  # as rl_zoo3 does: the check sees their ids
+                try:
+                    importlib.import_module(module)
+                except ImportError as exc:
+                    raise ValueError(f"--gym-packages {module}: {exc}") from None
             if (
                 algo == "swirl_dqn"
                 and _option(argv, "--vec-env") == "subproc"
@@ -478,6 +493,15 @@ def _train(argv: list[str]) -> int:
     if algo == "swirl_dqn":
         _write_task(argv, str(env_id))
     return 0
+
+
+def _gym_packages(argv: list[str]) -> list[str]:
+    """rl_zoo3's ``--gym-packages MODULE ...``: modules that register envs."""
+    import argparse
+
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("--gym-packages", nargs="+", default=[])
+    return list(parser.parse_known_args(argv)[0].gym_packages)
 
 
 def _custom_hyperparams(argv: list[str]) -> dict[str, Any]:

@@ -138,6 +138,13 @@ def test_train_enjoy_tensorboard_and_plots_swirl_dqn_and_dqn(tmp_path, zoo_cli):
     assert "true return" in out
     assert "Episode Length" in zoo_cli("enjoy", "--algo", "dqn", *enjoy)
 
+    # the monitor file logs each episode's success, which plot_train -y success reads
+    assert "is_success" in (run / "0.monitor.csv").read_text().splitlines()[1].split(",")
+    out = zoo_cli(
+        "plot_train", "-a", "swirl_dqn", "-e", "ParallelParking-v0", "-f", "logs", "-y", "success"
+    )
+    assert "No data" not in out
+
     plots = ["all_plots", "-a", "swirl_dqn", "dqn", "-e", "ParallelParking-v0", "-f", "logs"]
     zoo_cli(*plots, "--no-display", "-o", "curves", "-k", "results")
     zoo_cli("plot_from_file", "-i", "curves.pkl", "-o", "curves.png", "--format", "png")
@@ -194,6 +201,20 @@ def test_bad_yaml_fails_before_training_naming_the_problem(
     err = capsys.readouterr().err
     assert message in err and "bad.yml" in err
     assert not (tmp_path / "logs").exists()  # nothing started
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--env", "ParallelParking-v0"], "Did you mean 'sb3_swirl/ParallelParking-v0'?"),
+        (["--env", "Mine-v0", "--gym-packages", "no_such_module"], "--gym-packages no_such_module"),
+    ],
+)
+def test_unknown_env_id_fails_before_training(tmp_path, monkeypatch, capsys, argv, message):
+    monkeypatch.chdir(tmp_path)
+    assert zoo.main(["train", "--algo", "swirl_dqn", *argv, "-f", "logs"]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "logs").exists()
 
 
 def test_optimize_two_trials_writes_the_study(tmp_path, zoo_cli):
