@@ -14,6 +14,7 @@ from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.rewards import MaxEntIRLRewardLearner, QuadraticRewardLearner, RewardLearner
 from sb3_swirl.segmentation import TransitionStateClustering
 from swirl_wrappers import TaskModel
+from swirl_wrappers._validation import check_int
 from swirl_wrappers.task import angle_features, check_angles
 
 Progress = Callable[[str], None]
@@ -186,6 +187,8 @@ def fit_task(
         RewardLearner,
     )
     if random_state is not None:
+        if not isinstance(random_state, np.random.RandomState):  # sklearn takes both
+            random_state = check_int("random_state", random_state, low=0)
         segmenter.set_params(random_state=random_state)
 
     report("validating demonstrations")

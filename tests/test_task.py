@@ -247,7 +247,7 @@ def test_metadata_that_json_cannot_write_is_refused_at_construction():
 def test_binary_file_is_a_value_error_naming_it(tmp_path):
     path = tmp_path / "plot.png"
     path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff")
-    with pytest.raises(ValueError, match=r"cannot read task model file .*plot\.png"):
+    with pytest.raises(ValueError, match=r"task model file .*plot\.png: it is a binary file"):
         TaskModel.from_json(path)
 
 

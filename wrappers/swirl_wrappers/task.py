@@ -941,8 +941,13 @@ class TaskModel:
             try:
                 with open(file, encoding="utf-8") as fh:
                     text = fh.read()
-            except (OSError, UnicodeDecodeError) as exc:  # a binary file is not UTF-8
+            except OSError as exc:
                 raise ValueError(f"cannot read task model file {file}: {exc}") from exc
+            except UnicodeDecodeError:  # a binary file: demos (.npz), a model (.zip), a plot
+                raise ValueError(
+                    f"cannot read task model file {file}: it is a binary file, not the JSON "
+                    "text that TaskModel.to_json and `sb3-swirl fit` write"
+                ) from None
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
