@@ -367,9 +367,9 @@ def check_config(
     """Check the rl_zoo3 entry for ``env_id`` in ``config`` before anything trains.
 
     An unregistered ``env_id``, unknown keys (neither rl_zoo3's nor the algorithm's), unknown
-    ``SwirlTaskWrapper`` keys,
-    missing demo or task files and demos that do not match the env fail with a message naming
-    the file, the entry and the key. The SWIRL task is fitted here (and cached for the run).
+    ``SwirlTaskWrapper`` keys, missing demo or task files and demos that do not match the env
+    fail with a message naming the file, the entry and the key. The SWIRL task is fitted here
+    (and cached for the run).
 
     Returns
     -------
