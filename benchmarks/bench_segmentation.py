@@ -26,10 +26,10 @@ nuisance dimensions left out where they cut transitions); ``all-dims`` (the same
 ``ignore_nuisance_dims``); ``unmerged`` (the same without ``merge_fragments``);
 ``same-dynamics`` (the defaults with ``merge_same_dynamics=True``); ``auto``
 (``indicator="auto"``: the best of gmm, velocity and linear by
-:func:`~sb3_swirl.segmentation.dynamics_cv_error`); ``previous`` (the defaults before this
-benchmark: region floor ``reg_covar=1e-3``, no time normalisation, no merging, every
-dimension clustered); ``velocity``, ``linear`` (the other indicators of the paper's
-Fig. 6, other settings default);
+:func:`~sb3_swirl.segmentation.dynamics_cv_error`); ``auto-same-dynamics`` (both);
+``previous`` (the defaults before this benchmark: region floor ``reg_covar=1e-3``, no time
+normalisation, no merging, every dimension clustered); ``velocity``, ``linear`` (the other
+indicators of the paper's Fig. 6, other settings default);
 ``rpt-*``: ruptures (Pelt and Binseg with the l2 cost on velocities, KernelCPD with the RBF
 kernel on velocities) run per demo, then the same cross-demo consensus (clustering, pruning)
 and settings as ours.
@@ -67,6 +67,7 @@ METHODS: dict[str, dict[str, Any]] = {
     "all-dims": {"ignore_nuisance_dims": False},  # the defaults before nuisance dims
     "unmerged": {"merge_fragments": False},
     "same-dynamics": {"merge_same_dynamics": True},
+    "auto-same-dynamics": {"indicator": "auto", "merge_same_dynamics": True},
     "previous": {
         "reg_covar": 1e-3,
         "normalize_time": False,
