@@ -453,7 +453,7 @@ def _option(argv: list[str], *names: str, default: str | None = None) -> str | N
 
 def _train(argv: list[str]) -> int:
     from rl_zoo3.train import train
-    from rl_zoo3.utils import ALGOS
+    from rl_zoo3.utils import ALGOS, StoreDict
 
     algo = str(_option(argv, "--algo", default="ppo"))
     env_id = _option(argv, "--env", default="CartPole-v1")
@@ -466,7 +466,8 @@ def _train(argv: list[str]) -> int:
         print(f"sb3-swirl: hyperparameters from {config}", flush=True)
     if config is not None and algo in ALGOS:
         try:
-            for module in _gym_packages(argv):  # as rl_zoo3 does: the check sees their ids
+            # import the modules that register envs, as rl_zoo3 does: the check sees their ids
+            for module in _parsed(argv, "--gym-packages", nargs="+", default=[]):
                 try:
                     importlib.import_module(module)
                 except ImportError as exc:
@@ -481,7 +482,9 @@ def _train(argv: list[str]) -> int:
                     "task_reward_weight) would not reach the sub-processes; use the default "
                     "--vec-env dummy (Optuna's --n-jobs runs trials in parallel)"
                 )
-            entry = check_config(algo, str(env_id), config, _custom_hyperparams(argv))
+            # rl_zoo3's -params key:value ... overrides
+            overrides = _parsed(argv, "-params", "--hyperparams", nargs="+", action=StoreDict)
+            entry = check_config(algo, str(env_id), config, overrides)
         except ValueError as exc:  # before anything trains: one clear line, no traceback
             print(f"error: {exc}", file=sys.stderr)
             return 2
@@ -495,24 +498,14 @@ def _train(argv: list[str]) -> int:
     return 0
 
 
-def _gym_packages(argv: list[str]) -> list[str]:
-    """rl_zoo3's ``--gym-packages MODULE ...``: modules that register envs."""
+def _parsed(argv: list[str], *names: str, **kwargs: Any) -> Any:
+    """The value of the option ``names`` in ``argv``, parsed with ``kwargs`` (as rl_zoo3
+    declares it)."""
     import argparse
 
     parser = argparse.ArgumentParser(add_help=False)
-    parser.add_argument("--gym-packages", nargs="+", default=[])
-    return list(parser.parse_known_args(argv)[0].gym_packages)
-
-
-def _custom_hyperparams(argv: list[str]) -> dict[str, Any]:
-    """rl_zoo3's ``-params key:value ...`` overrides, parsed as rl_zoo3 parses them."""
-    import argparse
-
-    from rl_zoo3.utils import StoreDict
-
-    parser = argparse.ArgumentParser(add_help=False)
-    parser.add_argument("-params", "--hyperparams", nargs="+", action=StoreDict, default={})
-    return dict(parser.parse_known_args(argv)[0].hyperparams or {})
+    option = parser.add_argument(*names, **kwargs)
+    return getattr(parser.parse_known_args(argv)[0], option.dest)
 
 
 def _model_path(argv: list[str], env_id: str) -> tuple[str, str]:
