@@ -1343,22 +1343,40 @@ or callable, default "gmm"
         warnings.warn(message, SegmentationWarning, stacklevel=3)
 
     def _check_complete(self, segments: list[np.ndarray]) -> None:
-        """Raise unless enough demonstrations reach every region in order (after their start)."""
-        problems = []
+        """Raise unless enough demonstrations reach every region in order (after their start).
+
+        Where the goal is the only region left, demonstrations that start inside it are not
+        counted against the fit (with a warning) as long as at least half of them travel to
+        it: the demos of a task of holding a state (balancing) end where a few of them begin.
+        """
+        problems, at_goal = [], []
         for n, bounds in enumerate(segments):
             if bounds[0] == 0:
                 problems.append(f"demo {n} starts inside region 0")
+                at_goal.append(n)
             elif bounds[-1] < 0:
                 missed = int(np.argmax(bounds < 0))
                 problems.append(f"demo {n} never reaches region {missed}")
+        complete = len(segments) - len(problems)
+        goal_only = self.include_goal and len(self.regions_) == 1
+        excused = at_goal if goal_only and 2 * complete >= len(segments) else []
         need = self._min_demos(len(segments))
-        if len(segments) - len(problems) < need:
+        if complete + len(excused) < need:
             shown = "; ".join(problems[:5]) + ("; ..." if len(problems) > 5 else "")
             raise ValueError(
-                f"only {len(segments) - len(problems)} of {len(segments)} demonstrations reach "
+                f"only {complete} of {len(segments)} demonstrations reach "
                 f"the {len(self.regions_)} regions in order, {need} needed ({shown}). Do the "
                 "demonstrations move? Otherwise lower min_demo_fraction or change the "
                 "indicator or window"
+            )
+        if excused:
+            warnings.warn(
+                f"Demos {excused} start inside the goal region (where the demos end), as in a "
+                "task of holding a state such as balancing: it marks no transition for them, "
+                "and an episode that starts there is complete from its first step. The task "
+                "has one segment; to find phases, try indicator='velocity' or 'auto'",
+                SegmentationWarning,
+                stacklevel=4,
             )
 
     def _drop(

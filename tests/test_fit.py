@@ -252,3 +252,26 @@ def test_metadata_is_the_same_for_the_same_fit(demos):
     assert first.to_json() == second.to_json()
     recorded = first.metadata["segmentation"]["params"]["indicator"]
     assert recorded["kwargs"] == {"window": 4}
+
+
+def test_demos_that_start_at_the_goal_fit_one_segment_with_a_warning():
+    """Balancing: the demos end where one of them begins (CartPole under a feedback rule); the
+    fit keeps the goal and names that demo instead of failing."""
+    import gymnasium as gym
+
+    from sb3_swirl.segmentation import SegmentationWarning
+
+    env = gym.make("CartPole-v1")
+    demos = []
+    for seed in range(10):
+        obs, _ = env.reset(seed=seed)
+        states, actions, done = [obs], [], False
+        while not done:
+            actions.append(int(obs[2] + 0.5 * obs[3] > 0))
+            obs, _, terminated, truncated, _ = env.step(actions[-1])
+            states.append(obs)
+            done = terminated or truncated
+        demos.append(Demonstration(np.array(states), np.array(actions)))
+    with pytest.warns(SegmentationWarning, match=r"Demos \[9\] start inside the goal region"):
+        task = fit_task(demos, random_state=0)
+    assert task.n_segments == 1 and len(demos[9].observations) == 501
