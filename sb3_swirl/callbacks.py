@@ -322,7 +322,11 @@ class TaskEvalCallback(EvalCallback):
         score = (np.nan_to_num(success_rate, nan=-np.inf), task_return)
         if score > self.best_score:
             if self.verbose >= 1:
-                print("New best success rate!")
+                print(
+                    "New best success rate!"
+                    if np.isfinite(success_rate)
+                    else "New best true return! (the env reports no is_success)"
+                )
             if self.best_model_save_path is not None:
                 self.model.save(os.path.join(self.best_model_save_path, "best_model"))
             self.best_score = score

@@ -245,3 +245,12 @@ def test_task_eval_counts_a_missing_is_success_as_a_failure(tmp_path):
     saved = np.load(tmp_path / "evaluations.npz")
     for key in ("results", "ep_lengths", "successes", "task_returns"):
         assert saved[key].shape == (2, 4), key
+
+
+def test_task_eval_without_is_success_ranks_by_the_true_return(capsys):
+    model = DQN("MlpPolicy", "CartPole-v1", learning_starts=1000, seed=0)
+    callback = TaskEvalCallback(gym.make("CartPole-v1"), n_eval_episodes=2, eval_freq=50)
+    model.learn(100, callback=callback)
+    assert np.isnan(callback.success_rates).all() and len(callback.task_returns) == 2
+    out = capsys.readouterr().out
+    assert "New best true return!" in out and "New best success rate" not in out
