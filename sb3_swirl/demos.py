@@ -246,10 +246,20 @@ def check_demos_fit_spaces(
         if demo.actions is None or n_actions is None:
             continue
         actions = np.asarray(demo.actions)
-        if actions.ndim != 1 or not np.all(actions == np.round(actions)):
+        if actions.ndim != 1:
+            squeeze = (
+                " (one action a step: pass actions.ravel())" if actions.size == len(demo) else ""
+            )
             raise ValueError(
                 f"{source} {n}: actions must be integers of shape ({len(demo)},) "
-                f"for the Discrete({n_actions}) action space, got shape {actions.shape}"
+                f"for the Discrete({n_actions}) action space, got shape {actions.shape}{squeeze}"
+            )
+        fractional = np.flatnonzero(actions != np.round(actions))
+        if fractional.size:
+            step = int(fractional[0])
+            raise ValueError(
+                f"{source} {n}: actions must be integers for the Discrete({n_actions}) action "
+                f"space, got {actions[step]!r} at step {step}"
             )
         if actions.size and (actions.min() < 0 or actions.max() >= n_actions):
             raise ValueError(

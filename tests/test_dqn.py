@@ -220,9 +220,16 @@ def test_bc_under_vec_normalize_updates_the_statistics_with_the_demo_states():
         (Demonstration(np.zeros((5, 3)), np.zeros(4, dtype=int)), r"demonstration 0: .*3 dims"),
         (Demonstration(np.zeros((5, 2)), [0, 1, 4, 2]), r"1: .*Discrete\(4\).*0 \.\. 3"),
         (Demonstration(np.zeros((5, 2)), np.array([0, 1, -1, 2])), r"1: .*Discrete\(4\)"),
-        (Demonstration(np.zeros((5, 2)), np.array([0, 1, 0.5, 2])), r"1: actions must be int"),
+        (
+            Demonstration(np.zeros((5, 2)), np.array([0, 1, 0.5, 2])),
+            r"1: actions must be integers .*got 0\.5 at step 2",
+        ),
+        (
+            Demonstration(np.zeros((5, 2)), np.array([[0], [1], [0], [2]])),
+            r"1: .*shape \(4,\) .*got shape \(4, 1\) \(one action a step: pass actions\.ravel",
+        ),
     ],
-    ids=["state dims", "action too large", "negative action", "fractional action"],
+    ids=["state dims", "action too large", "negative action", "fractional action", "column"],
 )
 def test_demos_that_do_not_fit_the_env_are_refused_when_the_model_is_built(demo, match):
     """Not deep inside learn(): the message names the demo and the space."""
