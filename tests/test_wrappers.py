@@ -263,7 +263,10 @@ def test_several_state_keys_are_read_joined_in_order():
 @pytest.mark.parametrize(
     ("make", "message"),
     [
-        (lambda: SwirlWrapper(gym.make("FrozenLake-v1"), line_task()), "Box or Dict"),
+        (
+            lambda: SwirlWrapper(gym.make("FrozenLake-v1"), line_task()),
+            "Box or Dict .*FlattenObservation",
+        ),
         (lambda: SwirlWrapper(PointEnv(dim=2), line_task()), "task expects 1"),
         (
             lambda: SwirlWrapper(

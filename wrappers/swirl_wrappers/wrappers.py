@@ -105,7 +105,9 @@ def lift_observation_space(
         segment = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
         return spaces.Dict({**space.spaces, SEGMENT_KEY: segment}), state_key
     raise ValueError(
-        f"SWIRL wrappers need a Box or Dict observation space, got {type(space).__name__}"
+        f"SWIRL wrappers need a Box or Dict observation space, got {type(space).__name__}; "
+        "wrap the env in gymnasium.wrappers.FlattenObservation first (a Discrete state "
+        "becomes one-hot) and record the demos' states the same way"
     )
 
 
