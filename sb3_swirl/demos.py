@@ -89,6 +89,15 @@ def _to_demonstration(item: Any, i: int) -> Demonstration:
             rews = _field(item, ("rews", "rewards"))[1]
         else:
             obs, acts, rews = item, None, None
+            if isinstance(item, tuple) and len(item) in (2, 3):  # (obs, acts[, rews])?
+                try:
+                    np.asarray(item, dtype=np.float64)
+                except ValueError:
+                    raise ValueError(
+                        f"demo {i} is a tuple of {len(item)} arrays of different shapes; "
+                        "for observations and actions pass sb3_swirl.Demonstration("
+                        "observations, actions)"
+                    ) from None
 
     obs = _numeric(obs, f"demo {i}: observations")
     if obs.ndim != 2:

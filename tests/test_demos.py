@@ -172,6 +172,10 @@ def _bad(index, array):
         ),
         (_bad(2, {"observations": {"a": np.zeros((5, 2))}}), "demo 2: observations are a dict"),
         (_bad(2, np.zeros((1, 2))), "demo 2: needs at least 2 states"),
+        (
+            _bad(1, (np.zeros((5, 2)), np.zeros(4))),
+            r"demo 1 is a tuple of 2 arrays .*Demonstration\(observations, actions\)",
+        ),
     ],
 )
 def test_malformed_input_names_the_demo_and_problem(data, match):
