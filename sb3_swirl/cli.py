@@ -125,7 +125,10 @@ def _cmd_fit(args: argparse.Namespace) -> int:
             progress=lambda msg: status.update(msg),
         )
     task.to_json(args.output)
-    console.print(f"wrote a task with {task.n_segments} segments to {args.output}")
+    console.print(
+        f"wrote a task with {task.n_segments} segment{'s' * (task.n_segments != 1)} to "
+        f"{args.output}"
+    )
     scores = task.metadata["indicator_scores"]
     if len(scores) > 1:
         tried = ", ".join(
@@ -160,7 +163,7 @@ def _print_task(task) -> None:
             "side follow the same locally linear dynamics (--merge-same-dynamics)"
         )
     table = Table(
-        title=f"SWIRL proxy task: {task.n_segments} segments",
+        title=f"SWIRL proxy task: {task.n_segments} segment{'s' * (task.n_segments != 1)}",
         caption="segment i leads to region i; its reward is -(x - centre)ᵀ Ψ (x - centre)",
     )
     for name in ("segment", "region centre", "χ² threshold", "time window", "diag(Ψ)"):

@@ -268,5 +268,5 @@ def fit_task(
         metadata=metadata,
         angles=angles,
     )
-    report(f"done: {task.n_segments} segments")
+    report(f"done: {task.n_segments} segment{'s' * (task.n_segments != 1)}")
     return task
