@@ -606,6 +606,11 @@ def greedy_infos(policy: Any, env: gym.Env, seed: int) -> list[dict[str, Any]]:
             return infos
 
 
+def _score_policy(policy: Any, env: gym.Env, seeds: list[int]) -> dict[str, float]:
+    """:func:`_score_episodes` of greedy episodes of ``policy``, one per seed."""
+    return _score_episodes([greedy_infos(policy, env, seed) for seed in seeds])
+
+
 def _score_episodes(episodes: list[list[dict[str, Any]]]) -> dict[str, float]:
     """Tensioning episodes (each a list of step infos): mean disparity value (minus the
     disparity summed over the episode), success (flat at the end) and grasp rates."""
@@ -679,8 +684,7 @@ def reproduce_table1(
             ),
         }
         for name, (policy, score_env) in clones.items():
-            episodes = [greedy_infos(policy, score_env, s) for s in eval_seeds]
-            runs[name].append({"seed": seed} | _score_episodes(episodes))
+            runs[name].append({"seed": seed} | _score_policy(policy, score_env, eval_seeds))
         episodes = [
             greedy_infos(_OneEpisode(TensioningSupervisor(env.unwrapped, seed=s)), env, s)
             for s in eval_seeds
@@ -714,8 +718,7 @@ def reproduce_table1(
                 hyperparams=hyperparams,
                 keep_model=True,
             )
-            episodes = [greedy_infos(run["model"], run["eval_env"], s) for s in eval_seeds]
-            scored = _score_episodes(episodes)
+            scored = _score_policy(run["model"], run["eval_env"], eval_seeds)
             runs[name].append({"seed": seed, "wall_time_s": run["wall_time_s"]} | scored)
         env.close()
         lifted_env.close()
