@@ -170,8 +170,8 @@ def as_demonstrations(data: Any, window: int | None = None) -> list[Demonstratio
     ValueError
         With the demonstration index and the problem: no demonstrations, fewer than two,
         non-numeric or non-finite values (with the first bad step), observations not 2-D,
-        actions or rewards whose length is not T, a state dimension differing between
-        demonstrations, or a demonstration shorter than the window.
+        actions or rewards whose length is not T, a state dimension or an action shape
+        differing between demonstrations, or a demonstration shorter than the window.
     """
     if isinstance(data, str | os.PathLike):
         data = load_demos(data)
@@ -198,6 +198,14 @@ def as_demonstrations(data: Any, window: int | None = None) -> list[Demonstratio
         if demo.observations.shape[1] != dim:
             raise ValueError(
                 f"demo {i} has state dimension {demo.observations.shape[1]} but demo 0 has {dim}"
+            )
+    shapes = [(i, demo.actions.shape) for i, demo in enumerate(demos) if demo.actions is not None]
+    for i, shape in shapes[1:]:
+        if shape[1:] != shapes[0][1][1:]:
+            first, first_shape = shapes[0]
+            raise ValueError(
+                f"demo {i} has actions of shape {shape} but demo {first} has {first_shape}: "
+                "the actions of every demo must have the same shape after the first (time) axis"
             )
     if window is not None:
         if int(window) < 1:
@@ -411,7 +419,11 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
                 raise ValueError("not a NumPy .npz archive (save_demos writes one)")
         loaded = np.load(path, allow_pickle=False)
     except (OSError, EOFError, ValueError, zipfile.BadZipFile) as exc:
-        raise ValueError(f"cannot read demonstrations from {name}: {exc}") from exc
+        damaged = isinstance(exc, EOFError | zipfile.BadZipFile)
+        raise ValueError(
+            f"cannot read demonstrations from {name}: {exc}"
+            + (" (a truncated or damaged file?)" if damaged else "")
+        ) from exc
     if not isinstance(loaded, np.lib.npyio.NpzFile):
         raise ValueError(
             f"{name} holds a single array, not an sb3-swirl demonstration file (an .npz "

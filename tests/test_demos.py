@@ -89,7 +89,7 @@ def test_npz_round_trip_is_exact(tmp_path):
     demos = [
         Demonstration(rng.normal(size=(8, 2))),
         Demonstration(rng.normal(size=(5, 2)), np.array([0, 3, 1, 2], dtype=np.int64)),
-        Demonstration(rng.normal(size=(4, 2)), rng.normal(size=(3, 2)), rng.normal(size=3)),
+        Demonstration(rng.normal(size=(4, 2)), rng.normal(size=3), rng.normal(size=3)),
     ]
     path = tmp_path / "demos.npz"
     save_demos(demos, path)
@@ -173,6 +173,14 @@ def _bad(index, array):
         (_bad(2, {"observations": {"a": np.zeros((5, 2))}}), "demo 2: observations are a dict"),
         (_bad(2, np.zeros((1, 2))), "demo 2: needs at least 2 states"),
         (
+            [
+                Demonstration(np.zeros((5, 2)), np.zeros((4, 1))),
+                _arrays(1)[0],
+                Demonstration(np.zeros((5, 2)), np.zeros(4)),
+            ],
+            r"demo 2 has actions of shape \(4,\) but demo 0 has \(4, 1\)",
+        ),
+        (
             _bad(1, (np.zeros((5, 2)), np.zeros(4))),
             r"demo 1 is a tuple of 2 arrays .*Demonstration\(observations, actions\)",
         ),
@@ -209,7 +217,7 @@ def _damaged_demo_files(tmp_path):
     nan = data["obs_1"].copy()
     nan[3, 0] = np.nan
     return [
-        (truncated, "cannot read demonstrations"),
+        (truncated, r"cannot read demonstrations.*\(a truncated or damaged file\?\)"),
         (text, "cannot read demonstrations .*: not a NumPy .npz archive"),
         (tmp_path / "array.npy", "holds a single array"),
         (write("v99.npz", format=np.array("sb3_swirl.demos/99")), "unsupported .* format"),
