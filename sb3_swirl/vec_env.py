@@ -63,7 +63,7 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
         Sub-environments with a 1-D Box or a Dict observation space.
     task : TaskModel
     reward_config : RewardConfig or dict, optional
-        Default: ``task.reward_config``.
+        Default: ``task.reward_config``; a dict changes only the fields it names.
     state_key : str or sequence of str, optional
         For Dict observations, the key(s) of the task state (default ``"observation"``; see
         :func:`swirl_wrappers.lift_observation_space`).

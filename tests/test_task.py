@@ -483,6 +483,26 @@ def test_reward_config_round_trips_with_the_task(tmp_path):
     assert as_dict.reward_config == RewardConfig(region_bonus=2.0)
 
 
+def test_a_wrappers_reward_config_dict_changes_only_the_fields_it_names():
+    from swirl_wrappers import SegmentTracker
+
+    base = random_task(0)
+    shaped = RewardConfig(mode="potential", region_bonus=1.0, task_reward_weight=10.0)
+    task = TaskModel(base.regions, base.rewards, reward_config=shaped)
+    assert SegmentTracker(task).config == shaped
+    assert SegmentTracker(task, {"gamma": 0.9}).config == RewardConfig(
+        mode="potential", region_bonus=1.0, task_reward_weight=10.0, gamma=0.9
+    )
+    # a new mode takes its own default weight unless the dict names one
+    assert SegmentTracker(task, {"mode": "quadratic"}).config.task_reward_weight == 0.0
+    assert SegmentTracker(task, {"mode": "quadratic", "task_reward_weight": 2}).config == (
+        RewardConfig(region_bonus=1.0, task_reward_weight=2.0)
+    )
+    assert SegmentTracker(task, RewardConfig()).config == RewardConfig()  # replaced whole
+    with pytest.raises(ValueError, match=r"unknown key.*'reward_scale'"):
+        SegmentTracker(task, {"reward_scale": 2.0})
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [

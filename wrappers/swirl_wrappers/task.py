@@ -250,6 +250,32 @@ class RewardConfig:
         _check_keys(data, "reward_config", (), tuple(cls().to_dict()))
         return cls(**data)
 
+    def updated(self, value: RewardConfig | Mapping[str, Any] | None) -> RewardConfig:
+        """These settings with ``value`` applied, as the wrappers apply theirs to the task's.
+
+        ``None`` keeps them, a RewardConfig replaces them, and a mapping changes only the
+        fields it names: ``{"gamma": 0.9}`` keeps the mode and weights. A new ``mode`` without
+        a ``task_reward_weight`` takes that mode's default weight.
+
+        Examples
+        --------
+        >>> shaped = RewardConfig(mode="potential", task_reward_weight=10.0)
+        >>> shaped.updated({"gamma": 0.9}).gamma, shaped.updated({"gamma": 0.9}).mode
+        (0.9, 'potential')
+        >>> shaped.updated({"mode": "quadratic"}).task_reward_weight
+        0.0
+        """
+        if value is None or isinstance(value, RewardConfig):
+            return self if value is None else value
+        if not isinstance(value, Mapping):
+            raise ValueError(
+                f"reward_config must be a RewardConfig or a dict of its fields, got {value!r}"
+            )
+        fields = self.to_dict()
+        if value.get("mode", self.mode) != self.mode and "task_reward_weight" not in value:
+            del fields["task_reward_weight"]
+        return RewardConfig.from_dict({**fields, **value})
+
     @classmethod
     def coerce(cls, value: RewardConfig | Mapping[str, Any]) -> RewardConfig:
         """``value`` if it is a RewardConfig, else one built from a mapping of its fields."""

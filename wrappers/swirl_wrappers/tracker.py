@@ -50,7 +50,8 @@ class SegmentTracker:
     ----------
     task : TaskModel
     reward_config : RewardConfig or dict, optional
-        Default: the task's own ``task.reward_config``.
+        Default: the task's own ``task.reward_config``; a dict changes only the fields it
+        names (:meth:`RewardConfig.updated`).
     num_envs : int, optional
         ``None`` (default): one episode, whose state attributes are scalars. An int: that many
         episodes, whose state attributes are arrays of shape (num_envs,).
@@ -95,9 +96,7 @@ class SegmentTracker:
         if not isinstance(task, TaskModel):
             raise ValueError(f"task must be a swirl_wrappers.TaskModel, got {type(task).__name__}")
         self.task = task
-        self.config = (
-            task.reward_config if reward_config is None else RewardConfig.coerce(reward_config)
-        )
+        self.config = task.reward_config.updated(reward_config)
         self.num_envs = None if num_envs is None else check_int("num_envs", num_envs, low=1)
         self.terminate_on_completion = check_bool(
             "terminate_on_completion", terminate_on_completion
