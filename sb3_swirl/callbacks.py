@@ -164,8 +164,10 @@ class TaskEvalCallback(EvalCallback):
     ``task_returns``, ``evaluations_results`` / ``evaluations_length`` (proxy returns and
     lengths per episode), ``evaluations_successes`` / ``evaluations_task_returns`` /
     ``evaluations_final_segments`` per episode (an episode end without ``info["is_success"]``
-    is a failure; the success rate is NaN when no episode reports it). With ``log_path`` they
-    are saved to ``log_path/evaluations.npz`` after every evaluation.
+    is a failure; the success rate is NaN, and not logged, when no episode reports it). With
+    ``log_path`` they are saved to ``log_path/evaluations.npz`` after every evaluation, the
+    per-episode ones as ``results``, ``ep_lengths``, ``successes``, ``task_returns`` and
+    ``final_segments``.
 
     Parameters
     ----------
@@ -232,12 +234,6 @@ class TaskEvalCallback(EvalCallback):
         # Read where info has no "task_reward" (not a SWIRL env): the step reward is the task's.
         rewards = _original_rewards(unwrap_vec_normalize(self.eval_env), locals_["rewards"])
         counted = done and (not locals_["is_monitor_wrapped"] or "episode" in info)
-        if done and not counted and "segment" in info:
-            raise ValueError(
-                "the eval env's Monitor sits inside the SWIRL wrapper, which ended an episode "
-                "(terminate_on_completion) that the Monitor never saw; put Monitor outside: "
-                "make_swirl_env(env_id, task, wrapper_kwargs=...) does"
-            )
         summary = self._sums.step(i, float(rewards[i]), counted, info)
         if summary is not None:
             self._episodes.append(summary)
@@ -299,6 +295,7 @@ class TaskEvalCallback(EvalCallback):
                     ep_lengths=self.evaluations_length,
                     successes=self.evaluations_successes,
                     task_returns=self.evaluations_task_returns,
+                    final_segments=self.evaluations_final_segments,
                     success_rate=self.success_rates,
                     task_return=self.task_returns,
                 )
@@ -310,7 +307,8 @@ class TaskEvalCallback(EvalCallback):
             )
         self.logger.record("eval/mean_reward", self.last_mean_reward)
         self.logger.record("eval/mean_ep_length", float(np.mean(episode_lengths)))
-        self.logger.record("eval/success_rate", success_rate)
+        if np.isfinite(success_rate):  # as SB3's EvalCallback: only where the env reports it
+            self.logger.record("eval/success_rate", success_rate)
         self.logger.record("eval/task_return", task_return)
         if final_segments:
             self.logger.record("eval/final_segment_mean", float(np.mean(final_segments)))

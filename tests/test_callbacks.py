@@ -78,6 +78,8 @@ def test_task_eval_scores_true_success_and_saves_best(tmp_path):
     saved = np.load(tmp_path / "eval" / "evaluations.npz")
     np.testing.assert_array_equal(saved["episodes"], callback.evaluations_episodes)
     np.testing.assert_array_equal(saved["success_rate"], callback.success_rates)
+    np.testing.assert_array_equal(saved["final_segments"], callback.evaluations_final_segments)
+    assert saved["final_segments"].shape == (3, 5)
     log = logged(tmp_path)
     assert log["eval/success_rate"] and log["eval/task_return"]
 
@@ -184,8 +186,8 @@ class NoTermPoint(PointEnv):
 
 def test_task_eval_counts_episodes_ended_by_completion():
     """Monitor outside the SWIRL wrapper (make_swirl_env) sees the episodes that end on
-    completion; under an inner Monitor (make_vec_env(..., wrapper_class=SwirlWrapper)) it never
-    would, and evaluate_policy would run on: a clear error says where Monitor belongs."""
+    completion; an inner Monitor (make_vec_env(..., wrapper_class=SwirlWrapper)) never would,
+    and evaluate_policy would run on: the wrapper refuses it, saying where Monitor belongs."""
 
     def base():
         return gym.wrappers.TimeLimit(NoTermPoint(), 60)
@@ -200,15 +202,15 @@ def test_task_eval_counts_episodes_ended_by_completion():
     assert len(callback.evaluations_results[0]) == 5
     assert all(length < 60 for length in callback.evaluations_length[0])  # ended on completion
 
-    inner = make_vec_env(
-        base,
-        seed=0,
-        wrapper_class=SwirlWrapper,
-        wrapper_kwargs=dict(task=point_task(), **wrapper_kwargs),
-    )
-    callback = TaskEvalCallback(inner, n_eval_episodes=5, eval_freq=10, verbose=0)
-    with pytest.raises(ValueError, match=r"Monitor sits inside the SWIRL wrapper.*make_swirl_env"):
-        model.learn(10, callback=callback)
+    with pytest.raises(ValueError, match=r"must sit below SB3's Monitor.*make_swirl_env"):
+        make_vec_env(
+            base,
+            seed=0,
+            wrapper_class=SwirlWrapper,
+            wrapper_kwargs=dict(task=point_task(), **wrapper_kwargs),
+        )
+    inner = make_vec_env(base, wrapper_class=SwirlWrapper, wrapper_kwargs=dict(task=point_task()))
+    assert inner.num_envs == 1  # without terminate_on_completion the inner Monitor is fine
 
 
 class SuccessOnlyAtGoal(PointEnv):
@@ -247,10 +249,13 @@ def test_task_eval_counts_a_missing_is_success_as_a_failure(tmp_path):
         assert saved[key].shape == (2, 4), key
 
 
-def test_task_eval_without_is_success_ranks_by_the_true_return(capsys):
+def test_task_eval_without_is_success_ranks_by_the_true_return(capsys, tmp_path):
     model = DQN("MlpPolicy", "CartPole-v1", learning_starts=1000, seed=0)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
     callback = TaskEvalCallback(gym.make("CartPole-v1"), n_eval_episodes=2, eval_freq=50)
     model.learn(100, callback=callback)
     assert np.isnan(callback.success_rates).all() and len(callback.task_returns) == 2
     out = capsys.readouterr().out
     assert "New best true return!" in out and "New best success rate" not in out
+    log = logged(tmp_path)
+    assert len(log["eval/task_return"]) == 2 and "eval/success_rate" not in log  # not NaN

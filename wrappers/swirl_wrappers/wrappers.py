@@ -289,6 +289,21 @@ def _refuse_normalised_states(env: Any, wrapper: str) -> None:
         env = env.env
 
 
+def _refuse_monitor_below(env: Any) -> None:
+    """Raise if SB3's ``Monitor`` sits below a SwirlWrapper that ends episodes itself: it would
+    never see those episodes end, and record none of them."""
+    while isinstance(env, gym.Wrapper):
+        kind = type(env)
+        if kind.__name__ == "Monitor" and kind.__module__.startswith("stable_baselines3"):
+            raise ValueError(
+                "SwirlWrapper(terminate_on_completion=True) must sit below SB3's Monitor, which "
+                "would never see the episodes it ends: wrap as Monitor(SwirlWrapper(env, task, "
+                "...)), as sb3_swirl.make_swirl_env(env_id, task, wrapper_kwargs=...) does. "
+                "make_vec_env(..., wrapper_class=SwirlWrapper) and the zoo put Monitor first"
+            )
+        env = env.env
+
+
 class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Track the segment of a SWIRL proxy task and reward the agent with its local reward.
 
@@ -305,11 +320,12 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
     task : TaskModel
         The proxy task; its ``dims`` / features must fit the observation.
     reward_config : RewardConfig or dict, optional
-        How the agent is rewarded; default ``task.reward_config``.
+        How the agent is rewarded; default ``task.reward_config``. A dict changes only the
+        fields it names (:meth:`RewardConfig.updated`).
     terminate_on_completion : bool
-        End the episode (``terminated=True``) when the last region is reached. With SB3, keep
-        ``Monitor`` outside this wrapper so that it records such episodes (``make_swirl_env``
-        does).
+        End the episode (``terminated=True``) when the last region is reached. With SB3,
+        ``Monitor`` must be outside this wrapper, to record such episodes (``make_swirl_env``
+        puts it there); an SB3 ``Monitor`` inside is refused.
     state_key : str or sequence of str, optional
         For Dict observations, the key holding the task state (default ``"observation"``), or
         keys whose values the task reads concatenated (:func:`lift_observation_space`).
@@ -371,6 +387,8 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.tracker = SegmentTracker(
             task, reward_config, terminate_on_completion=terminate_on_completion
         )
+        if self.tracker.terminate_on_completion:
+            _refuse_monitor_below(env)
         self._goal_env = hasattr(env.unwrapped, "compute_reward")
         goal_keys = getattr(env.unwrapped, "goal_keys", ("desired_goal",))
         self._reads_goal = [
