@@ -419,11 +419,12 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
                 raise ValueError("not a NumPy .npz archive (save_demos writes one)")
         loaded = np.load(path, allow_pickle=False)
     except (OSError, EOFError, ValueError, zipfile.BadZipFile) as exc:
-        damaged = isinstance(exc, EOFError | zipfile.BadZipFile)
-        raise ValueError(
-            f"cannot read demonstrations from {name}: {exc}"
-            + (" (a truncated or damaged file?)" if damaged else "")
-        ) from exc
+        hint = ""
+        if isinstance(exc, EOFError | zipfile.BadZipFile):
+            hint = " (a truncated or damaged file?)"
+        elif isinstance(exc, FileNotFoundError) and not name.endswith(".npz"):
+            hint = " (a Minari dataset id? pass minari.load_dataset(id) instead of its id)"
+        raise ValueError(f"cannot read demonstrations from {name}: {exc}{hint}") from exc
     if not isinstance(loaded, np.lib.npyio.NpzFile):
         raise ValueError(
             f"{name} holds a single array, not an sb3-swirl demonstration file (an .npz "

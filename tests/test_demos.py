@@ -109,8 +109,10 @@ def test_load_rejects_foreign_and_missing_files(tmp_path):
     np.savez(path, x=np.zeros(3))
     with pytest.raises(ValueError, match="not an sb3-swirl demonstration file"):
         load_demos(path)
-    with pytest.raises(ValueError, match="cannot read demonstrations"):
+    with pytest.raises(ValueError, match=r"cannot read demonstrations.*No such file.*npz'$"):
         load_demos(tmp_path / "missing.npz")
+    with pytest.raises(ValueError, match=r"a Minari dataset id\? pass minari.load_dataset"):
+        as_demonstrations("D4RL/door/human-v2")
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
