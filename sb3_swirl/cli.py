@@ -234,8 +234,12 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     sweep = {"backend": args.backend, "jobs": args.jobs, "address": args.address}
     if not swept and (args.resume or args.backend != "joblib" or args.address):
         raise ValueError(f"{args.name} is not a sweep: --backend, --address, --resume do not apply")
+    if args.address and args.backend != "ray":
+        raise ValueError("--address is a Ray cluster's: add --backend ray")
     if args.name != "fig9" and args.repeats is not None:
         raise ValueError("--repeats is Fig. 9's (random demo sets)")
+    if args.repeats is not None and args.seeds:
+        raise ValueError("--repeats sets Fig. 9's demo-set seeds (100, 101, ...): drop --seeds")
     for flag in ("panels", "methods"):
         if getattr(args, flag) and args.name not in EXPERIMENTS:
             raise ValueError(f"--{flag} applies to the figures, not to {args.name}")
@@ -413,7 +417,8 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning
             return args.func(args)
-    except (ValueError, OSError) as exc:  # OSError: a path that is a folder, unwritable...
+    # OSError: a path that is a folder, unwritable...; ImportError: an optional extra missing
+    except (ValueError, OSError, ImportError) as exc:
         # soft_wrap: never break a path a user may copy; escape: paths may contain [brackets]
         console.print(f"[bold red]error:[/] {escape(str(exc))}", soft_wrap=True)
         return 2

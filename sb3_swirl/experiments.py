@@ -31,6 +31,17 @@ from swirl_wrappers._validation import check_int, check_option
 console = Console(stderr=True)
 
 
+def _table_console() -> Console:
+    """Where tables are printed: the terminal's width, or 160 columns when piped to a file."""
+    return Console(width=None if sys.stdout.isatty() else 160)
+
+
+def output_name(stem: str, suffix: str, quick: bool) -> str:
+    """``results.json`` for a full run, ``results_quick.json`` for ``--quick``: a quick run
+    never overwrites the full run's outputs."""
+    return f"{stem}{'_quick' if quick else ''}{suffix}"
+
+
 @dataclass(frozen=True)
 class Preset:
     """What the main job runs on one shipped task.
@@ -549,7 +560,7 @@ def run_demo(
             f"{run['final_success']:.0%}",
             f"{run['wall_time_s']:.0f} s",
         )
-    Console().print(table)
+    _table_console().print(table)
     if ratio is not None:
         console.print(f"SWIRL needed {ratio:.2f}× DQN's rollouts")
     console.print(f"wrote {out}/results.json, learning_curve.png, {', '.join(pictures)}, task.json")
@@ -751,7 +762,8 @@ def reproduce_table1(
         "paper_swirl_gain_over_segmented_bc": 1.0
         - PAPER_TABLE1["swirl"] / PAPER_TABLE1["segmented_bc"],
     }
-    write_results(results, out / "results.json")
+    path = out / output_name("results", ".json", quick)
+    write_results(results, path)
 
     table = Table(title=f"Table 1, gauze tensioning ({len(seeds)} seed(s) × {n_eval} episodes)")
     for column in ("method", "value (mean ± std over seeds)", "flat at the end", "grasped"):
@@ -766,11 +778,11 @@ def reproduce_table1(
             f"{row['grasp_rate']:.0%}",
             "—" if paper is None else f"{paper:.0f}",
         )
-    Console().print(table)
+    _table_console().print(table)
     console.print(
         f"SWIRL's value is {gain:.1%} better than segmented BC's "
         f"(paper: {results['paper_swirl_gain_over_segmented_bc']:.1%}); "
-        f"SWIRL found {segments} segments. Wrote {out}/results.json"
+        f"SWIRL found {segments} segments. Wrote {path}"
     )
     return results
 
@@ -912,7 +924,8 @@ def reproduce_table2(
         "summary": summary,
         "swirl_successes": [combined, n_eval * len(runs)],
     }
-    write_results(results, out / "results.json")
+    path = out / output_name("results", ".json", quick)
+    write_results(results, path)
 
     def cm(value: float | None) -> str:
         return "—" if value is None else f"{value:.2f}"
@@ -934,10 +947,9 @@ def reproduce_table2(
             f"{cm(paper[0])} / {cm(paper[1])}",
             f"{cm(paper[2])} / {cm(paper[3])}",
         )
-    Console().print(table)
+    _table_console().print(table)
     console.print(
-        f"SWIRL cut {combined} of {n_eval * len(runs)} lines (paper: 11 of 15). "
-        f"Wrote {out}/results.json"
+        f"SWIRL cut {combined} of {n_eval * len(runs)} lines (paper: 11 of 15). Wrote {path}"
     )
     return results
 
@@ -1414,16 +1426,18 @@ def reproduce(
     from sb3_swirl.runner import run_sweep
 
     experiment = EXPERIMENTS[check_option("experiment", name, tuple(EXPERIMENTS))]
-    panels = list(experiment.panels) if panels is None else panels
+    # each once, in the order given: a repeated one would count its runs twice
+    panels = list(dict.fromkeys(experiment.panels if panels is None else panels))
     for panel in panels:
         check_option("panel", panel, tuple(experiment.panels))
-    methods = list(experiment.methods) if methods is None else methods
+    methods = list(dict.fromkeys(experiment.methods if methods is None else methods))
     for label in methods:
         check_option("method", label, tuple(experiment.methods))
     if repeats is not None:
         seeds = list(range(100, 100 + check_int("repeats", repeats, low=2)))
     if seeds is None:
         seeds = list(experiment.seeds[: experiment.quick_seeds] if quick else experiment.seeds)
+    seeds = list(dict.fromkeys(seeds))
     for seed in seeds:
         check_int("seed", seed, low=0)
     out = Path(out_dir) / name
@@ -1433,7 +1447,7 @@ def reproduce(
     records = run_sweep(
         method_run,
         work,
-        out / ("runs_quick.jsonl" if quick else "runs.jsonl"),
+        out / output_name("runs", ".jsonl", quick),
         backend=backend,
         n_jobs=jobs,
         address=address,
@@ -1463,10 +1477,11 @@ def reproduce(
         "ratios": ratios,
         "runs": runs,
     }
-    write_results(results, out / "results.json")
-    _plot_experiment(experiment, panels, methods, runs, out / "figure.png")
+    paths = [out / output_name(*name, quick) for name in (("results", ".json"), ("figure", ".png"))]
+    write_results(results, paths[0])
+    _plot_experiment(experiment, panels, methods, runs, paths[1], quick)
     console.print(f"paper: {experiment.claim}", soft_wrap=True)
-    console.print(f"wrote {out}/results.json, figure.png", soft_wrap=True)
+    console.print(f"wrote {paths[0]}, {paths[1].name}", soft_wrap=True)
     return results
 
 
@@ -1525,7 +1540,7 @@ def _print_summary(experiment: Experiment, summary: list[dict[str, Any]]) -> Non
             "never" if rollouts is None else f"{rollouts:g}",
             f"{row['reached_target']}/{row['seeds']}",
         )
-    Console(width=None if sys.stdout.isatty() else 160).print(table)
+    _table_console().print(table)
 
 
 def _band(values: np.ndarray, spread: str) -> tuple[np.ndarray, np.ndarray]:
@@ -1541,10 +1556,12 @@ def _plot_experiment(
     methods: list[str],
     runs: list[dict[str, Any]],
     path: Path,
+    quick: bool = False,
 ) -> None:
     """One subplot per panel, like the paper's figures: true success against rollouts (a
     line per method, shaded over the seeds; behavioural cloning, which takes none, as a
-    dashed level), or against the swept value (lines; bars for named settings)."""
+    dashed level), or against the swept value (lines; bars for named settings). A ``quick``
+    run says so in the title: its budgets are not those the panel titles give."""
     from sb3_swirl.plotting import _finish, _new_figure
 
     fig = _new_figure((max(5.5 * len(panels), 8.0), 4.4))
@@ -1600,18 +1617,37 @@ def _plot_experiment(
         ax.set_ylim(-0.02, 1.05)
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize="small")
-    fig.suptitle(experiment.title, fontsize="medium")
+    title = experiment.title
+    if quick:
+        title = f"--quick run (small budgets, not the setting below): {title}"
+    fig.suptitle(title, fontsize="medium")
     _finish(fig, path)
 
 
 def reproduce_all(*, quick: bool = False, out_dir: str | Path = "results", **sweep: Any) -> dict:
     """Every table and figure, one after the other (each in its own ``out_dir/NAME/``);
     ``sweep`` (``jobs``, ``backend``, ``address``, ``resume``, ``progress``) goes to each.
-    Returns ``{name: results}``."""
+    Every output is checked first: without ``resume`` any that exists is an error; with it, a
+    table already written is kept and each figure's sweep goes on. Returns ``{name: results}``."""
     progress = sweep.pop("progress", True)
+    tables = {
+        name: Path(out_dir) / name / output_name("results", ".json", quick)
+        for name in ("table1", "table2")
+    }
+    runs = [Path(out_dir) / name / output_name("runs", ".jsonl", quick) for name in EXPERIMENTS]
+    existing = [path for path in [*tables.values(), *runs] if path.exists()]
+    if existing and not sweep.get("resume", False):  # checked before hours of work, not after
+        raise ValueError(
+            f"{', '.join(map(str, existing))} exist{'s' * (len(existing) == 1)}: resume "
+            "(--resume keeps the tables and runs done) or choose another output"
+        )
     results = {}
-    for name in ("table1", "table2"):
-        results[name] = REPRODUCTIONS[name](quick=quick, out_dir=out_dir, progress=progress)
+    for name, path in tables.items():
+        if path.exists():
+            console.print(f"{name}: kept {path} (--resume)", soft_wrap=True)
+            results[name] = json.loads(path.read_text())
+        else:
+            results[name] = REPRODUCTIONS[name](quick=quick, out_dir=out_dir, progress=progress)
     for name in EXPERIMENTS:
         results[name] = reproduce(name, quick=quick, out_dir=out_dir, progress=progress, **sweep)
     return results

@@ -138,12 +138,13 @@ def run_sweep(
         runs = _joblib_runs(function, pending, n_jobs)
     from rich.progress import Progress
 
-    with Progress(disable=not progress, transient=True) as bar, path.open("a") as fh:
+    with Progress(disable=not progress, transient=True) as bar:
         task = bar.add_task(f"{len(pending)} runs ({len(done)} done before)", total=len(pending))
         for job, result in runs:
             line = json.dumps({"job": job, "result": result}, default=str)
-            fh.write(line + "\n")
-            fh.flush()
+            # opened per run: a backend that fails to start leaves no empty file behind
+            with path.open("a") as fh:
+                fh.write(line + "\n")
             done[_key(job)] = json.loads(line)["result"]
             bar.advance(task)
     return [done[_key(job)] for job in jobs]

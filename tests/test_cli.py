@@ -335,15 +335,20 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
     from sb3_swirl.experiments import EXPERIMENTS, reproduce
 
     kwargs = {"quick": True, "panels": ["parking"], "out_dir": tmp_path, "progress": False}
-    first = reproduce("fig2", **kwargs, methods=["swirl"])
+    first = reproduce("fig2", **kwargs, methods=["swirl", "swirl"], seeds=[10, 10])
     assert [r["method"] for r in first["runs"]] == ["swirl"] and first["ratios"] == []
+    assert first["seeds"] == [10]  # a repeated method or seed is one run, counted once
     with pytest.raises(ValueError, match="exists: resume the sweep"):
         reproduce("fig2", **kwargs)
     results = reproduce("fig2", **kwargs, resume=True)  # the other methods join the run made
     assert {r["method"] for r in results["runs"]} == set(EXPERIMENTS["fig2"].methods)
     assert [r for r in results["runs"] if r["method"] == "swirl"] == first["runs"]
-    assert (tmp_path / "fig2" / "figure.png").stat().st_size > 10_000
-    saved = json.loads((tmp_path / "fig2" / "results.json").read_text())
+    # a quick run's outputs have their own names: it never overwrites a full run's
+    assert sorted(path.name for path in (tmp_path / "fig2").iterdir()) == [
+        "figure_quick.png", "results_quick.json", "runs_quick.jsonl"
+    ]  # fmt: skip
+    assert (tmp_path / "fig2" / "figure_quick.png").stat().st_size > 10_000
+    saved = json.loads((tmp_path / "fig2" / "results_quick.json").read_text())
     assert saved["summary"] == results["summary"]
     final = {row["method"]: row["final_success_mean"] for row in saved["summary"]}
     pairs = {(row["ours"], row["theirs"]): row for row in saved["ratios"]}
@@ -358,6 +363,19 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
     assert main(["reproduce", "fig7", "--panels", "nope", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig7", "--methods", "ppo", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "table2", "--methods", "swirl", "--out", str(tmp_path)]) == 2
+    assert main(["reproduce", "fig2", "--address", "auto", "--out", str(tmp_path)]) == 2
+    assert main(["reproduce", "fig9", "--repeats", "3", "--seeds", "1", "--out", "x"]) == 2
+
+
+def test_reproduce_all_checks_every_output_before_any_work(tmp_path, capsys):
+    """A table's results or a figure's runs already there: one error up front, not after the
+    tables have run (and been overwritten)."""
+    table = tmp_path / "table1" / "results_quick.json"
+    table.parent.mkdir()
+    table.write_text("{}")
+    assert main(["reproduce", "all", "--quick", "--out", str(tmp_path), "-q"]) == 2
+    assert "table1/results_quick.json exists: resume (--resume" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["table1"]  # nothing else was made
 
 
 def test_transfer_runs_take_demos_on_one_env_and_learn_on_another():
@@ -411,5 +429,5 @@ def test_every_figure_quick_has_every_panel_method_and_seed(name, tmp_path):
         if m not in panel.skip
         for s in seeds
     }
-    assert json.loads((tmp_path / name / "results.json").read_text())["summary"]
-    assert (tmp_path / name / "figure.png").stat().st_size > 10_000
+    assert json.loads((tmp_path / name / "results_quick.json").read_text())["summary"]
+    assert (tmp_path / name / "figure_quick.png").stat().st_size > 10_000

@@ -315,7 +315,7 @@ def test_reproduce_table2_quick(tmp_path):
     from sb3_swirl.experiments import reproduce_table2
 
     reproduce_table2(quick=True, out_dir=tmp_path, progress=False)
-    results = json.loads((tmp_path / "table2" / "results.json").read_text())
+    results = json.loads((tmp_path / "table2" / "results_quick.json").read_text())
     assert [entry["radius_cm"] for entry in results["summary"]] == [None, 3.0, 1.5]
     for run in results["runs"]:
         for method in ("svm", "swirl"):

@@ -200,7 +200,7 @@ def test_reproduce_table1_quick(tmp_path):
     from sb3_swirl.experiments import reproduce_table1
 
     reproduce_table1(quick=True, out_dir=tmp_path, progress=False)
-    results = json.loads((tmp_path / "table1" / "results.json").read_text())
+    results = json.loads((tmp_path / "table1" / "results_quick.json").read_text())
     summary = results["summary"]
     assert set(summary) == {"rl", "bc", "segmented_bc", "swirl", "swirl_no_bc", "supervisor"}
     for row in summary.values():

@@ -57,3 +57,12 @@ def test_ray_backend_gives_the_same_records_as_joblib(tmp_path, importable):
 def test_bad_backend_is_a_clear_error(tmp_path):
     with pytest.raises(ValueError, match="backend"):
         run_sweep(noisy, JOBS, tmp_path / "x.jsonl", backend="dask", progress=False)
+
+
+def test_a_backend_that_fails_to_start_leaves_no_runs_file(tmp_path, monkeypatch):
+    """Else the same command, run again, would refuse: the (empty) runs file exists."""
+    monkeypatch.setitem(__import__("sys").modules, "ray", None)  # Ray not installed
+    path = tmp_path / "runs.jsonl"
+    with pytest.raises(ImportError, match=r"needs Ray: pip install 'sb3-swirl\[ray\]'"):
+        run_sweep(noisy, JOBS, path, backend="ray", progress=False)
+    assert not path.exists()
