@@ -47,6 +47,17 @@ def _seed(text: str) -> int:
     return seed
 
 
+def _positive(text: str) -> int:
+    """``--jobs``, ``-n``: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    return value
+
+
 def _writable_folder(path: Path) -> None:
     """Raise unless files can be made in folder ``path`` (created if missing, as by mkdir -p)."""
     existing = path
@@ -268,11 +279,14 @@ def build_parser() -> argparse.ArgumentParser:
         prog="sb3-swirl",
         description="SWIRL for Stable-Baselines3: demos -> segments -> rewards -> RL.",
     )
+    from sb3_swirl import __version__
+
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("demos", help="generate supervisor demonstrations of a shipped env")
     p.add_argument("env_id", help="e.g. sb3_swirl/ParallelParking-v0")
-    p.add_argument("-n", type=int, default=5, help="number of demos (default 5)")
+    p.add_argument("-n", type=_positive, default=5, help="number of demos (default 5)")
     p.add_argument(
         "--seed", type=_seed, default=0, help="seeds the episodes and the supervisor (default 0)"
     )
@@ -369,11 +383,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME",
         help=", ".join([*REPRODUCTIONS, "all"]),
     )
-    p.add_argument("--quick", action="store_true", help="one seed, small budgets (minutes)")
+    p.add_argument(
+        "--quick", action="store_true", help="one seed (fig9: three), small budgets (minutes)"
+    )
     p.add_argument("--seeds", type=_seed, nargs="+", default=None, help="override the seeds")
     p.add_argument("--out", default="results", help="output folder (default results/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    p.add_argument("--jobs", type=int, default=2, help="runs at once (figures)")
+    p.add_argument("--jobs", type=_positive, default=2, help="runs at once (figures)")
     p.add_argument(
         "--backend",
         default="joblib",

@@ -1443,7 +1443,7 @@ def reproduce(
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
     labels, work = _jobs(experiment, panels, methods, seeds, quick)
-    console.rule(f"[bold]{experiment.title}: {len(work)} runs, {backend}")
+    console.rule(f"[bold]{experiment.title}: {len(work)} run{'s' * (len(work) != 1)}, {backend}")
     records = run_sweep(
         method_run,
         work,
@@ -1516,15 +1516,16 @@ def _ratio_line(row: dict[str, Any], counted: str = "rollouts") -> str:
     if row["median"] is None:
         return f"{head} unresolved (half the {n} seeds or more have no upper bound)"
     return (
-        f"{head} median {row['bound']} {row['median']:.3f} over {n} seeds (IQR {row['q25']:.3f}-"
+        f"{head} median {row['bound']} {row['median']:.3f} over {n} seed{'s' * (n != 1)} "
+        f"(IQR {row['q25']:.3f}-"
         f"{row['q75']:.3f}; reached: {row['ours_reached']} / {row['theirs_reached']} seeds)"
     )
 
 
 def _print_summary(experiment: Experiment, summary: list[dict[str, Any]]) -> None:
     swept = any(row["x"] is not None for row in summary)
-    table = Table(title=f"{experiment.title} (true success over the seeds)")
-    columns = ["panel", "method"] + (["x"] if swept else [])
+    table = Table(title=f"{experiment.title}: true success over the seeds")
+    columns = ["panel", "method"] + ([experiment.x_label] if swept else [])
     counted = experiment.counted
     columns += ["seeds", "final success", f"{counted} to target (median)", "seeds reaching it"]
     for column in columns:

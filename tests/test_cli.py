@@ -328,6 +328,18 @@ def test_reproduce_refuses_unknown_names_and_bad_seeds(capsys):
         with pytest.raises(SystemExit):
             main(argv)
     assert "-1" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["reproduce", "fig2", "--jobs", "0"])
+    assert "argument --jobs: expected an integer >= 1, got '0'" in capsys.readouterr().err
+
+
+def test_version(capsys):
+    import sb3_swirl
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0
+    assert capsys.readouterr().out == f"sb3-swirl {sb3_swirl.__version__}\n"
 
 
 def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
