@@ -7,6 +7,7 @@ rl-zoo share one tuned set.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import statistics
@@ -116,6 +117,17 @@ _ZOO_ONLY_KEYS = {
     "callback",
     "monitor_kwargs",  # the zoo's monitor file only
 }
+
+
+def settings_stamp() -> dict[str, str]:
+    """What a run depends on beyond its arguments: this package's version and a digest of the
+    shipped zoo configs (the tuned hyperparameters). Stored with sweeps' runs and results."""
+    from sb3_swirl import __version__
+
+    digest = hashlib.sha256()
+    for algo in ("dqn", "swirl_dqn"):
+        digest.update((files("sb3_swirl.zoo_configs") / f"{algo}.yml").read_bytes())
+    return {"sb3_swirl": __version__, "zoo_configs": digest.hexdigest()[:16]}
 
 
 def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
@@ -1443,6 +1455,7 @@ def reproduce(
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
     labels, work = _jobs(experiment, panels, methods, seeds, quick)
+    stamp = settings_stamp()
     console.rule(f"[bold]{experiment.title}: {len(work)} run{'s' * (len(work) != 1)}, {backend}")
     records = run_sweep(
         method_run,
@@ -1453,6 +1466,7 @@ def reproduce(
         address=address,
         resume=resume,
         progress=progress,
+        stamp=stamp,
     )
     runs = [
         {"panel": panel, "label": label, "x": x, "seed": seed, "job": job} | record
@@ -1473,6 +1487,7 @@ def reproduce(
         "quick": quick,
         "seeds": seeds,
         "backend": backend,
+        "settings": stamp,
         "summary": summary,
         "ratios": ratios,
         "runs": runs,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -31,9 +32,9 @@ def _call(function: Callable[..., Any], job: Mapping[str, Any]) -> tuple[dict, A
     return dict(job), function(**job)
 
 
-def _read_done(path: Path) -> dict[str, Any]:
+def _read_done(path: Path) -> dict[str, dict[str, Any]]:
     """The records already in ``path`` by job; a line cut short by a crash is ignored."""
-    done: dict[str, Any] = {}
+    done: dict[str, dict[str, Any]] = {}
     if not path.exists():
         return done
     for line in path.read_text().splitlines():
@@ -41,8 +42,25 @@ def _read_done(path: Path) -> dict[str, Any]:
             record = json.loads(line)
         except json.JSONDecodeError:
             continue  # the last line of an interrupted write
-        done[_key(record["job"])] = record["result"]
+        done[_key(record["job"])] = record
     return done
+
+
+def _warn_other_settings(
+    done: Mapping[str, Mapping[str, Any]], keys: Sequence[str], stamp: Mapping[str, Any], path: Path
+) -> None:
+    """Warn when runs kept from ``path`` were made under another ``stamp`` (other code or
+    configs): a resumed sweep reuses them as they are."""
+    other = [done[key].get("stamp") or {} for key in keys if done[key].get("stamp") != stamp]
+    if not other:
+        return
+    changed = sorted({name for old in other for name in stamp if old.get(name) != stamp[name]})
+    warnings.warn(
+        f"{len(other)} of the {len(keys)} runs kept from {path} were made with other settings "
+        f"(not the same: {', '.join(changed)}); they are reused as they are. For runs with "
+        "today's settings, choose another output",
+        stacklevel=3,
+    )
 
 
 def _joblib_runs(
@@ -93,6 +111,7 @@ def run_sweep(
     address: str | None = None,
     resume: bool = False,
     progress: bool = True,
+    stamp: Mapping[str, Any] | None = None,
 ) -> list[Any]:
     """Run ``function(**job)`` for every job; return the results in the order of ``jobs``.
 
@@ -104,7 +123,8 @@ def run_sweep(
     jobs : sequence of mappings
         Keyword arguments of each run (JSON-serialisable; equal mappings are one job).
     path : path
-        JSON-lines file of ``{"job": ..., "result": ...}``, one line appended per finished run.
+        JSON-lines file of ``{"job": ..., "result": ...[, "stamp": ...]}``, one line appended
+        per finished run.
     backend : {"joblib", "ray"}
     n_jobs : int
         Runs at once (joblib), or the CPUs of a local Ray instance.
@@ -115,6 +135,10 @@ def run_sweep(
         ``path`` is an error (nothing a user saved is overwritten).
     progress : bool
         A progress bar over the runs.
+    stamp : mapping, optional
+        What the runs depend on beyond their arguments (the code's version, the configs'
+        digest), JSON-serialisable: stored with each record, and a warning when ``resume``
+        keeps records made under another stamp.
 
     Raises
     ------
@@ -132,6 +156,8 @@ def run_sweep(
     done = _read_done(path)
     unique = {_key(job): dict(job) for job in jobs}
     pending = [job for key, job in unique.items() if key not in done]
+    if stamp is not None:
+        _warn_other_settings(done, [key for key in unique if key in done], stamp, path)
     if backend == "ray":
         runs = _ray_runs(function, pending, n_jobs, address)
     else:
@@ -141,10 +167,11 @@ def run_sweep(
     with Progress(disable=not progress, transient=True) as bar:
         task = bar.add_task(f"{len(pending)} runs ({len(done)} done before)", total=len(pending))
         for job, result in runs:
-            line = json.dumps({"job": job, "result": result}, default=str)
+            record = {"job": job, "result": result} | ({} if stamp is None else {"stamp": stamp})
+            line = json.dumps(record, default=str)
             # opened per run: a backend that fails to start leaves no empty file behind
             with path.open("a") as fh:
                 fh.write(line + "\n")
-            done[_key(job)] = json.loads(line)["result"]
+            done[_key(job)] = json.loads(line)
             bar.advance(task)
-    return [done[_key(job)] for job in jobs]
+    return [done[_key(job)]["result"] for job in jobs]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -66,3 +67,19 @@ def test_a_backend_that_fails_to_start_leaves_no_runs_file(tmp_path, monkeypatch
     with pytest.raises(ImportError, match=r"needs Ray: pip install 'sb3-swirl\[ray\]'"):
         run_sweep(noisy, JOBS, path, backend="ray", progress=False)
     assert not path.exists()
+
+
+def test_resuming_runs_made_under_other_settings_warns(tmp_path, importable):
+    """Runs are stamped (code version, configs digest); a resume that keeps runs stamped
+    otherwise says so, and which part differs."""
+    path = tmp_path / "runs.jsonl"
+    old = {"sb3_swirl": "0.1.0", "zoo_configs": "aaaa"}
+    run_sweep(noisy, JOBS[:2], path, progress=False, stamp=old)
+    assert all(json.loads(line)["stamp"] == old for line in path.read_text().splitlines())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        run_sweep(noisy, JOBS[:3], path, resume=True, progress=False, stamp=old)  # no warning
+    new = {"sb3_swirl": "0.1.0", "zoo_configs": "bbbb"}
+    with pytest.warns(UserWarning, match=r"3 of the 3 runs kept .* \(not the same: zoo_configs\)"):
+        results = run_sweep(noisy, JOBS[:4], path, resume=True, progress=False, stamp=new)
+    assert results == [noisy(**job) for job in JOBS[:4]]
