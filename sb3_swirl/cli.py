@@ -242,9 +242,12 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
     _writable_folder(Path(args.out))
     swept = args.name in EXPERIMENTS or args.name == "all"
-    sweep = {"backend": args.backend, "jobs": args.jobs, "address": args.address}
-    if not swept and (args.resume or args.backend != "joblib" or args.address):
-        raise ValueError(f"{args.name} is not a sweep: --backend, --address, --resume do not apply")
+    sweep = {"backend": args.backend, "jobs": args.jobs or 2, "address": args.address}
+    if not swept and (args.resume or args.backend != "joblib" or args.address or args.jobs):
+        raise ValueError(
+            f"{args.name} is not a sweep (its runs go one after the other): --jobs, --backend, "
+            "--address, --resume do not apply"
+        )
     if args.address and args.backend != "ray":
         raise ValueError("--address is a Ray cluster's: add --backend ray")
     if args.name != "fig9" and args.repeats is not None:
@@ -389,7 +392,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=_seed, nargs="+", default=None, help="override the seeds")
     p.add_argument("--out", default="results", help="output folder (default results/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    p.add_argument("--jobs", type=_positive, default=2, help="runs at once (figures)")
+    p.add_argument("--jobs", type=_positive, help="runs at once (figures; default 2)")
     p.add_argument(
         "--backend",
         default="joblib",

@@ -371,6 +371,7 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
     again = reproduce("fig2", **kwargs, resume=True)  # every run done: nothing is retrained
     assert again["summary"] == results["summary"]
     assert main(["reproduce", "table1", "--resume", "--out", str(tmp_path)]) == 2
+    assert main(["reproduce", "table2", "--jobs", "3", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig3", "--repeats", "5", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig7", "--panels", "nope", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig7", "--methods", "ppo", "--out", str(tmp_path)]) == 2
