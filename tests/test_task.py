@@ -279,6 +279,8 @@ def test_binary_file_is_a_value_error_naming_it(tmp_path):
         (lambda d: d["rewards"][0].update(target=["1.5", 0, 0, 0]), "target must be real"),
         (lambda d: d["rewards"].pop(), "one reward per region"),
         (lambda d: d.update(dims=[0, 1]), "dims selects 2 values"),
+        (lambda d: d.update(dims=[0, 2, 0, 1]), r"dims lists \[0\] more than once"),
+        (lambda d: d["regions"][1]["mean"].pop(), r"shape \(3, 3\) to match Region\.mean \(3"),
         (lambda d: d.update(features={"type": "poly"}), "unknown feature map type"),
     ],
 )
@@ -312,7 +314,7 @@ def test_missing_file_is_a_value_error(tmp_path):
         ({"covariance": [[1.0, 0.5], [0.0, 1.0]]}, "symmetric"),
         ({"covariance": [[np.nan, 0.0], [0.0, 1.0]]}, "NaN or inf"),
         ({"mean": [np.nan, 0.0]}, "NaN or inf"),
-        ({"mean": [0.0, 0.0, 0.0]}, "shape"),
+        ({"mean": [0.0, 0.0, 0.0]}, r"shape \(3, 3\) to match Region\.mean \(3 entries\)"),
         ({"threshold": -1.0}, "threshold"),
         ({"threshold": np.inf}, "threshold"),
         ({"time_bounds": (5, 1)}, "time_bounds"),

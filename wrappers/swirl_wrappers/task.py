@@ -327,7 +327,8 @@ class Region:
         cov = _as_float_array(self.covariance, "Region.covariance", 2)
         if cov.shape != (mean.size, mean.size):
             raise ValueError(
-                f"Region.covariance must have shape {(mean.size, mean.size)}, got {cov.shape}"
+                f"Region.covariance must have shape {(mean.size, mean.size)} to match "
+                f"Region.mean ({mean.size} entries), got {cov.shape}"
             )
         if not np.allclose(cov, cov.T):
             raise ValueError("Region.covariance must be symmetric")
@@ -407,8 +408,8 @@ class QuadraticReward:
         weight = _as_float_array(self.weight, "QuadraticReward.weight", 2)
         if weight.shape != (target.size, target.size):
             raise ValueError(
-                f"QuadraticReward.weight must have shape {(target.size, target.size)}, "
-                f"got {weight.shape}"
+                f"QuadraticReward.weight must have shape {(target.size, target.size)} to match "
+                f"QuadraticReward.target ({target.size} entries), got {weight.shape}"
             )
         if not np.allclose(weight, weight.T):
             raise ValueError("QuadraticReward.weight must be symmetric")
@@ -588,6 +589,9 @@ class TaskModel:
                     f"segment {i}: region/reward dimension differs from task-space dimension {p}"
                 )
         dims = None if self.dims is None else _as_indices(self.dims, "TaskModel.dims")
+        if dims is not None and len(set(dims)) < len(dims):
+            twice = sorted({d for d in dims if dims.count(d) > 1})
+            raise ValueError(f"TaskModel.dims lists {twice} more than once: {list(dims)}")
         angles = check_angles(self.angles)
         if angles is not None and dims is None:
             raise ValueError(
