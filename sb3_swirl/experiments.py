@@ -1578,6 +1578,8 @@ def _plot_experiment(
     line per method, shaded over the seeds; behavioural cloning, which takes none, as a
     dashed level), or against the swept value (lines; bars for named settings). A ``quick``
     run says so in the title: its budgets are not those the panel titles give."""
+    from matplotlib.ticker import ScalarFormatter
+
     from sb3_swirl.plotting import _finish, _new_figure
 
     fig = _new_figure((max(5.5 * len(panels), 8.0), 4.4))
@@ -1621,8 +1623,10 @@ def _plot_experiment(
             band = _band(success, experiment.spread)
             ax.fill_between(episodes, *band, color=color, alpha=0.15)
             ends.append(episodes[-1])
-        if ends and max(ends) > 5 * max(min(ends), 1):  # budgets far apart (Fig. 2: 1M steps)
+        # budgets far apart (Fig. 2: 1M steps) and reaching 100 rollouts or more: a log axis
+        if ends and max(ends) >= 100 and max(ends) > 5 * max(min(ends), 1):
             ax.set_xscale("symlog", linthresh=10)
+            ax.xaxis.set_major_formatter(ScalarFormatter())  # 1000, not 10³
         if named:
             ax.set_xticks(np.arange(len(xs)), xs)
         elif xs != [None]:
@@ -1635,7 +1639,7 @@ def _plot_experiment(
         ax.legend(loc="best", fontsize="small")
     title = experiment.title
     if quick:
-        title = f"--quick run (small budgets, not the setting below): {title}"
+        title = f"--quick run (small budgets, not the paper's setting): {title}"
     fig.suptitle(title, fontsize="medium")
     _finish(fig, path)
 
