@@ -203,9 +203,11 @@ def as_demonstrations(data: Any, window: int | None = None) -> list[Demonstratio
     for i, shape in shapes[1:]:
         if shape[1:] != shapes[0][1][1:]:
             first, first_shape = shapes[0]
+            column = {shape[1:], first_shape[1:]} == {(), (1,)}
             raise ValueError(
                 f"demo {i} has actions of shape {shape} but demo {first} has {first_shape}: "
                 "the actions of every demo must have the same shape after the first (time) axis"
+                + ("; for one discrete action a step, pass actions.ravel()" if column else "")
             )
     if window is not None:
         if int(window) < 1:

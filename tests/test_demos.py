@@ -180,7 +180,7 @@ def _bad(index, array):
                 _arrays(1)[0],
                 Demonstration(np.zeros((5, 2)), np.zeros(4)),
             ],
-            r"demo 2 has actions of shape \(4,\) but demo 0 has \(4, 1\)",
+            r"demo 2 has actions of shape \(4,\) but demo 0 has \(4, 1\).*actions\.ravel\(\)",
         ),
         (
             _bad(1, (np.zeros((5, 2)), np.zeros(4))),
