@@ -154,14 +154,16 @@ class TaskEvalCallback(EvalCallback):
     Every ``eval_freq`` calls it runs :func:`~stable_baselines3.common.evaluation.evaluate_policy`
     for ``n_eval_episodes`` episodes on ``eval_env`` and logs ``eval/success_rate``,
     ``eval/task_return`` (mean undiscounted ``info["task_reward"]``, the env's own reward) and
-    ``eval/final_segment_mean`` (SWIRL envs) besides SB3's ``eval/mean_reward`` (the proxy
-    return) and ``eval/mean_ep_length``. The best model (highest success rate, ties broken by
+    ``eval/final_segment_mean`` (SWIRL envs) besides SB3's ``eval/mean_reward`` and
+    ``eval/mean_ep_length``. ``eval/mean_reward`` is the return ``evaluate_policy`` reads: the
+    proxy return with ``Monitor`` outside the SWIRL wrapper (``make_swirl_env``), the env's
+    own with a ``Monitor`` inside it (the zoo). The best model (highest success rate, ties broken by
     true return) goes to ``best_model_save_path/best_model.zip``. Episodes are counted as
     ``evaluate_policy`` counts them (by ``Monitor`` when the env has one).
 
     History, one entry per evaluation: ``evaluations_timesteps``, ``evaluations_episodes``
     (training episodes finished so far: the paper's "rollouts"), ``success_rates``,
-    ``task_returns``, ``evaluations_results`` / ``evaluations_length`` (proxy returns and
+    ``task_returns``, ``evaluations_results`` / ``evaluations_length`` (those returns and
     lengths per episode), ``evaluations_successes`` / ``evaluations_task_returns`` /
     ``evaluations_final_segments`` per episode (an episode end without ``info["is_success"]``
     is a failure; the success rate is NaN, and not logged, when no episode reports it). With
