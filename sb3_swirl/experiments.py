@@ -37,7 +37,7 @@ def _table_console() -> Console:
     return Console(width=None if sys.stdout.isatty() else 160)
 
 
-def output_name(stem: str, suffix: str, quick: bool) -> str:
+def _output_name(stem: str, suffix: str, quick: bool) -> str:
     """``results.json`` for a full run, ``results_quick.json`` for ``--quick``: a quick run
     never overwrites the full run's outputs."""
     return f"{stem}{'_quick' if quick else ''}{suffix}"
@@ -119,7 +119,7 @@ _ZOO_ONLY_KEYS = {
 }
 
 
-def settings_stamp() -> dict[str, str]:
+def _settings_stamp() -> dict[str, str]:
     """What a run depends on beyond its arguments: this package's version and a digest of the
     shipped zoo configs (the tuned hyperparameters). Stored with sweeps' runs and results."""
     from sb3_swirl import __version__
@@ -774,7 +774,7 @@ def reproduce_table1(
         "paper_swirl_gain_over_segmented_bc": 1.0
         - PAPER_TABLE1["swirl"] / PAPER_TABLE1["segmented_bc"],
     }
-    path = out / output_name("results", ".json", quick)
+    path = out / _output_name("results", ".json", quick)
     write_results(results, path)
 
     table = Table(title=f"Table 1, gauze tensioning ({len(seeds)} seed(s) × {n_eval} episodes)")
@@ -936,7 +936,7 @@ def reproduce_table2(
         "summary": summary,
         "swirl_successes": [combined, n_eval * len(runs)],
     }
-    path = out / output_name("results", ".json", quick)
+    path = out / _output_name("results", ".json", quick)
     write_results(results, path)
 
     def cm(value: float | None) -> str:
@@ -1455,12 +1455,12 @@ def reproduce(
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
     labels, work = _jobs(experiment, panels, methods, seeds, quick)
-    stamp = settings_stamp()
+    stamp = _settings_stamp()
     console.rule(f"[bold]{experiment.title}: {len(work)} run{'s' * (len(work) != 1)}, {backend}")
     records = run_sweep(
         method_run,
         work,
-        out / output_name("runs", ".jsonl", quick),
+        out / _output_name("runs", ".jsonl", quick),
         backend=backend,
         n_jobs=jobs,
         address=address,
@@ -1492,11 +1492,12 @@ def reproduce(
         "ratios": ratios,
         "runs": runs,
     }
-    paths = [out / output_name(*name, quick) for name in (("results", ".json"), ("figure", ".png"))]
-    write_results(results, paths[0])
-    _plot_experiment(experiment, panels, methods, runs, paths[1], quick)
+    saved = out / _output_name("results", ".json", quick)
+    figure = out / _output_name("figure", ".png", quick)
+    write_results(results, saved)
+    _plot_experiment(experiment, panels, methods, runs, figure, quick)
     console.print(f"paper: {experiment.claim}", soft_wrap=True)
-    console.print(f"wrote {paths[0]}, {paths[1].name}", soft_wrap=True)
+    console.print(f"wrote {saved}, {figure.name}", soft_wrap=True)
     return results
 
 
@@ -1532,8 +1533,8 @@ def _ratio_line(row: dict[str, Any], counted: str = "rollouts") -> str:
         return f"{head} unresolved (half the {n} seeds or more have no upper bound)"
     return (
         f"{head} median {row['bound']} {row['median']:.3f} over {n} seed{'s' * (n != 1)} "
-        f"(IQR {row['q25']:.3f}-"
-        f"{row['q75']:.3f}; reached: {row['ours_reached']} / {row['theirs_reached']} seeds)"
+        f"(IQR {row['q25']:.3f}-{row['q75']:.3f}; "
+        f"reached: {row['ours_reached']} / {row['theirs_reached']} seeds)"
     )
 
 
@@ -1651,10 +1652,10 @@ def reproduce_all(*, quick: bool = False, out_dir: str | Path = "results", **swe
     table already written is kept and each figure's sweep goes on. Returns ``{name: results}``."""
     progress = sweep.pop("progress", True)
     tables = {
-        name: Path(out_dir) / name / output_name("results", ".json", quick)
+        name: Path(out_dir) / name / _output_name("results", ".json", quick)
         for name in ("table1", "table2")
     }
-    runs = [Path(out_dir) / name / output_name("runs", ".jsonl", quick) for name in EXPERIMENTS]
+    runs = [Path(out_dir) / name / _output_name("runs", ".jsonl", quick) for name in EXPERIMENTS]
     existing = [path for path in [*tables.values(), *runs] if path.exists()]
     if existing and not sweep.get("resume", False):  # checked before hours of work, not after
         raise ValueError(
