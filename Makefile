@@ -50,7 +50,7 @@ test-slow: install
 	$(BIN)/python -m pytest -m slow -q
 
 bench: install
-	$(BIN)/python benchmarks/run_all.py
+	$(BIN)/python benchmarks/run_all.py $(ARGS)
 
 lint: install
 	$(BIN)/ruff check . && $(BIN)/ruff format --check .
