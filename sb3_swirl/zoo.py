@@ -225,8 +225,11 @@ class SwirlTaskWrapper(SwirlWrapper):
         :func:`sb3_swirl.fit_task` settings (``reg_covar``, ``indicator``, ``dims``, ...).
     seed : int
         The fit's ``random_state`` (and the supervisor's default seed).
-    reward_config, terminate_on_completion, state_key :
+    reward_config, state_key :
         As in :class:`~swirl_wrappers.SwirlWrapper`.
+    terminate_on_completion : bool
+        Refused: rl_zoo3 puts its ``Monitor`` below this wrapper, which would never see the
+        episodes it ends (in Python, :func:`sb3_swirl.make_swirl_env` puts ``Monitor`` outside).
 
     Attributes
     ----------
@@ -244,6 +247,13 @@ class SwirlTaskWrapper(SwirlWrapper):
         terminate_on_completion: bool = False,
         state_key: StateKey = None,
     ) -> None:
+        if terminate_on_completion:  # before the fit: check_config builds this wrapper too
+            raise ValueError(
+                "terminate_on_completion cannot be used in the zoo: rl_zoo3 puts its Monitor "
+                "below the SWIRL wrapper, and the Monitor would never see the episodes it ends. "
+                "In Python, make_swirl_env(env_id, task, wrapper_kwargs={'terminate_on_completion'"
+                ": True}) puts Monitor outside"
+            )
         saved = os.environ.get(TASK_FILE_ENV)
         reward = {**(reward_config or {}), **getattr(_TRIAL, "reward_config", {})}
         if saved:  # enjoy: the task the model was trained with

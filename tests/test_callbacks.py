@@ -10,6 +10,7 @@ import pytest
 from stable_baselines3 import DQN, PPO
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import configure
+from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecNormalize
 from test_dqn import PointEnv, point_demos, point_env, point_task
 
@@ -209,6 +210,12 @@ def test_task_eval_counts_episodes_ended_by_completion():
             wrapper_class=SwirlWrapper,
             wrapper_kwargs=dict(task=point_task(), **wrapper_kwargs),
         )
+
+    class MyMonitor(Monitor):
+        pass
+
+    with pytest.raises(ValueError, match=r"must sit below SB3's Monitor"):
+        SwirlWrapper(MyMonitor(base()), point_task(), **wrapper_kwargs)
     inner = make_vec_env(base, wrapper_class=SwirlWrapper, wrapper_kwargs=dict(task=point_task()))
     assert inner.num_envs == 1  # without terminate_on_completion the inner Monitor is fine
 

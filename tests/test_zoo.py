@@ -177,6 +177,7 @@ def test_yaml_for_a_plain_gymnasium_env_with_a_demo_file(tmp_path, monkeypatch):
         ({"demos": {"n_demos": 3}}, "MountainCar-v0 ships no supervisor"),
         ({"env": "CartPole-v1"}, "observations have 2 dims, but CartPole-v1's observations have 4"),
         ({"env_wrapper": None}, "swirl_dqn needs the SWIRL task"),
+        ({"terminate_on_completion": True}, "terminate_on_completion cannot be used in the zoo"),
     ],
 )
 def test_bad_yaml_fails_before_training_naming_the_problem(
@@ -189,7 +190,7 @@ def test_bad_yaml_fails_before_training_naming_the_problem(
     env_id = change.pop("env", "MountainCar-v0")
     spec = dict(entry["env_wrapper"][0]["sb3_swirl.zoo.SwirlTaskWrapper"])
     for key, value in change.items():
-        if key in ("demos", "fit", "fitt"):
+        if key in ("demos", "fit", "fitt", "terminate_on_completion"):
             spec[key] = value
         else:
             entry[key] = value

@@ -293,8 +293,10 @@ def _refuse_monitor_below(env: Any) -> None:
     """Raise if SB3's ``Monitor`` sits below a SwirlWrapper that ends episodes itself: it would
     never see those episodes end, and record none of them."""
     while isinstance(env, gym.Wrapper):
-        kind = type(env)
-        if kind.__name__ == "Monitor" and kind.__module__.startswith("stable_baselines3"):
+        if any(  # by name: this package does not depend on SB3; subclasses count
+            kind.__name__ == "Monitor" and kind.__module__.startswith("stable_baselines3")
+            for kind in type(env).__mro__
+        ):
             raise ValueError(
                 "SwirlWrapper(terminate_on_completion=True) must sit below SB3's Monitor, which "
                 "would never see the episodes it ends: wrap as Monitor(SwirlWrapper(env, task, "
