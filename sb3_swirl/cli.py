@@ -252,8 +252,6 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         raise ValueError("--address is a Ray cluster's: add --backend ray")
     if args.name != "fig9" and args.repeats is not None:
         raise ValueError("--repeats is Fig. 9's (random demo sets)")
-    if args.repeats is not None and args.seeds:
-        raise ValueError("--repeats sets Fig. 9's demo-set seeds (100, 101, ...): drop --seeds")
     for flag in ("panels", "methods"):
         if getattr(args, flag) and args.name not in EXPERIMENTS:
             raise ValueError(f"--{flag} applies to the figures, not to {args.name}")

@@ -424,7 +424,7 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
         hint = ""
         if isinstance(exc, EOFError | zipfile.BadZipFile):
             hint = " (a truncated or damaged file?)"
-        elif isinstance(exc, FileNotFoundError) and not name.endswith(".npz"):
+        elif isinstance(exc, FileNotFoundError) and not os.path.splitext(name)[1]:
             hint = " (a Minari dataset id? pass minari.load_dataset(id) instead of its id)"
         raise ValueError(f"cannot read demonstrations from {name}: {exc}{hint}") from exc
     if not isinstance(loaded, np.lib.npyio.NpzFile):

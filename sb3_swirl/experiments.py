@@ -660,7 +660,7 @@ def reproduce_table1(
     each episode's seed), the demonstrator's own score. Every method is scored on the same
     greedy evaluation episodes by the disparity value (minus the disparity in cm² summed over
     the 100 steps; the paper's units are not given, so only ratios compare). Writes
-    ``out_dir/table1/results.json``.
+    ``out_dir/table1/results.json`` (``results_quick.json`` with ``quick``).
 
     Parameters
     ----------
@@ -678,7 +678,7 @@ def reproduce_table1(
     base = PRESETS["tensioning"]
     steps = 2_000 if quick else base.total_timesteps
     n_eval = 3 if quick else 10
-    seeds = ([0] if quick else [0, 1, 2, 3, 4]) if seeds is None else seeds
+    seeds = ([0] if quick else [0, 1, 2, 3, 4]) if seeds is None else list(dict.fromkeys(seeds))
     for seed in seeds:
         check_int("seed", seed, low=0)
     # train_and_evaluate's own evaluation runs once, at the end, on one episode: every method
@@ -773,6 +773,7 @@ def reproduce_table1(
         "swirl_gain_over_segmented_bc": gain,
         "paper_swirl_gain_over_segmented_bc": 1.0
         - PAPER_TABLE1["swirl"] / PAPER_TABLE1["segmented_bc"],
+        "stamp": _settings_stamp(),
     }
     path = out / _output_name("results", ".json", quick)
     write_results(results, path)
@@ -846,7 +847,7 @@ def reproduce_table2(
     25 episodes of exploration on that line, and both policies scored on the same greedy
     episodes: cut success (start within 1 cm of the line's start, never more than 1 cm off it),
     position and tracking errors (cm, over the episodes that began a cut). Writes
-    ``out_dir/table2/results.json``.
+    ``out_dir/table2/results.json`` (``results_quick.json`` with ``quick``).
 
     Parameters
     ----------
@@ -863,7 +864,7 @@ def reproduce_table2(
     preset = PRESETS["linecutting"]
     radii = [None, 3.0, 1.5] if quick else list(PAPER_TABLE2)
     episodes, n_eval = (10, 5) if quick else (25, 15)
-    seeds = ([0] if quick else [0, 1, 2]) if seeds is None else seeds
+    seeds = ([0] if quick else [0, 1, 2]) if seeds is None else list(dict.fromkeys(seeds))
     for seed in seeds:
         check_int("seed", seed, low=0)
     out = Path(out_dir) / "table2"
@@ -935,6 +936,7 @@ def reproduce_table2(
         "runs": runs,
         "summary": summary,
         "swirl_successes": [combined, n_eval * len(runs)],
+        "stamp": _settings_stamp(),
     }
     path = out / _output_name("results", ".json", quick)
     write_results(results, path)
@@ -1411,11 +1413,12 @@ def reproduce(
     seed (× swept value) is a :func:`method_run`, fanned out by
     :func:`sb3_swirl.runner.run_sweep`.
 
-    Each record lands in ``out_dir/NAME/runs.jsonl`` (``runs_quick.jsonl``) as it finishes,
-    so an interrupted sweep resumes (``resume``). Then writes ``results.json`` (the settings,
-    the paper's claim, every run with its curve, and the summary of :func:`_summary`) and
-    ``figure.png`` (one panel per task: mean true success against rollouts, or against the
-    swept value, shaded over the seeds), and prints the summary table.
+    Each record lands in ``out_dir/NAME/runs.jsonl`` as it finishes, so an interrupted sweep
+    resumes (``resume``). Then writes ``results.json`` (the settings and the stamp of this
+    call, the paper's claim, every run with its curve, and the summary of :func:`_summary`)
+    and ``figure.png`` (one panel per task: mean true success against rollouts, or against the
+    swept value, shaded over the seeds), and prints the summary table. With ``quick`` the
+    three files are ``runs_quick.jsonl``, ``results_quick.json`` and ``figure_quick.png``.
 
     Parameters
     ----------
@@ -1446,6 +1449,8 @@ def reproduce(
     for label in methods:
         check_option("method", label, tuple(experiment.methods))
     if repeats is not None:
+        if seeds is not None:
+            raise ValueError("repeats sets Fig. 9's demo-set seeds (100, 101, ...): drop seeds")
         seeds = list(range(100, 100 + check_int("repeats", repeats, low=2)))
     if seeds is None:
         seeds = list(experiment.seeds[: experiment.quick_seeds] if quick else experiment.seeds)
@@ -1487,7 +1492,7 @@ def reproduce(
         "quick": quick,
         "seeds": seeds,
         "backend": backend,
-        "settings": stamp,
+        "stamp": stamp,
         "summary": summary,
         "ratios": ratios,
         "runs": runs,
@@ -1667,6 +1672,13 @@ def reproduce_all(*, quick: bool = False, out_dir: str | Path = "results", **swe
         if path.exists():
             console.print(f"{name}: kept {path} (--resume)", soft_wrap=True)
             results[name] = json.loads(path.read_text())
+            if results[name].get("stamp") != _settings_stamp():
+                warnings.warn(
+                    f"{path} was made with other settings (package version or zoo configs); "
+                    "it is kept as it is. For a table with today's settings, choose another "
+                    "output",
+                    stacklevel=2,
+                )
         else:
             results[name] = REPRODUCTIONS[name](quick=quick, out_dir=out_dir, progress=progress)
     for name in EXPERIMENTS:

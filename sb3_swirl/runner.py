@@ -153,6 +153,8 @@ def run_sweep(
     if path.exists() and not resume:
         raise ValueError(f"{path} exists: resume the sweep (--resume) or choose another output")
     path.parent.mkdir(parents=True, exist_ok=True)
+    if not os.access(path if path.exists() else path.parent, os.W_OK):  # before any run
+        raise ValueError(f"cannot write {path}: no permission to append the runs' records")
     done = _read_done(path)
     unique = {_key(job): dict(job) for job in jobs}
     pending = [job for key, job in unique.items() if key not in done]

@@ -342,7 +342,7 @@ def test_version(capsys):
     assert capsys.readouterr().out == f"sb3-swirl {sb3_swirl.__version__}\n"
 
 
-def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
+def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path, capsys):
     """A tiny Fig. 2 (parking, one seed, 3000 steps per method) through the sweep runner."""
     from sb3_swirl.experiments import EXPERIMENTS, reproduce
 
@@ -371,13 +371,22 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path):
     again = reproduce("fig2", **kwargs, resume=True)  # every run done: nothing is retrained
     assert again["summary"] == results["summary"]
     assert main(["reproduce", "table1", "--resume", "--out", str(tmp_path)]) == 2
+    capsys.readouterr()
     assert main(["reproduce", "table2", "--jobs", "3", "--out", str(tmp_path)]) == 2
+    assert "table2 is not a sweep (its runs go one after the other): --jobs" in _err(capsys)
     assert main(["reproduce", "fig3", "--repeats", "5", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig7", "--panels", "nope", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig7", "--methods", "ppo", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "table2", "--methods", "swirl", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig2", "--address", "auto", "--out", str(tmp_path)]) == 2
+    assert "--address is a Ray cluster's: add --backend ray" in _err(capsys)
     assert main(["reproduce", "fig9", "--repeats", "3", "--seeds", "1", "--out", "x"]) == 2
+    assert "repeats sets Fig. 9's demo-set seeds (100, 101, ...): drop seeds" in _err(capsys)
+
+
+def _err(capsys) -> str:
+    """What the CLI printed to stderr since the last call, on one line."""
+    return " ".join(capsys.readouterr().err.split())
 
 
 def test_reproduce_all_checks_every_output_before_any_work(tmp_path, capsys):

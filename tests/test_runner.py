@@ -83,3 +83,13 @@ def test_resuming_runs_made_under_other_settings_warns(tmp_path, importable):
     with pytest.warns(UserWarning, match=r"3 of the 3 runs kept .* \(not the same: zoo_configs\)"):
         results = run_sweep(noisy, JOBS[:4], path, resume=True, progress=False, stamp=new)
     assert results == [noisy(**job) for job in JOBS[:4]]
+
+
+def test_a_runs_file_that_cannot_be_appended_to_fails_before_any_run(tmp_path, monkeypatch):
+    """Not after the first run, whose record would be lost (the permission is faked: root, as
+    on CI, may write any file)."""
+    monkeypatch.setattr("sb3_swirl.runner.os.access", lambda path, mode: False)
+    path = tmp_path / "runs.jsonl"
+    with pytest.raises(ValueError, match=r"cannot write .*runs\.jsonl: no permission"):
+        run_sweep(noisy, JOBS, path, progress=False)
+    assert not path.exists()
