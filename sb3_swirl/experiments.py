@@ -1603,7 +1603,10 @@ def _plot_experiment(
             text = METHOD_LABELS.get(label, label)
             k = list(experiment.methods).index(label)  # a method's colour, also in a subset
             color = f"C{k}"
-            style = {"color": color, "marker": "osD^v"[k % 5], "markersize": 4}
+            # drawn earlier, drawn wider: a method whose line a later one covers still shows
+            behind = len(methods) - 1 - i
+            style = {"color": color, "marker": "osD^v"[k % 5]}
+            style |= {"markersize": 4 + 1.2 * behind, "linewidth": 1.5 + 0.6 * behind}
             if xs != [None]:  # success after the budget against the swept value
                 finals = [[r["final_success"] for r in these if r["x"] == x] for x in xs]
                 mean = np.array([np.mean(f) for f in finals])
