@@ -119,6 +119,15 @@ _ZOO_ONLY_KEYS = {
 }
 
 
+def _checked_seeds(seeds: list[int]) -> list[int]:
+    """Each seed once, in the order given (a repeated one would count its runs twice), and
+    each an integer >= 0."""
+    seeds = list(dict.fromkeys(seeds))
+    for seed in seeds:
+        check_int("seed", seed, low=0)
+    return seeds
+
+
 def _settings_stamp() -> dict[str, str]:
     """What a run depends on beyond its arguments: this package's version and a digest of the
     shipped zoo configs (the tuned hyperparameters). Stored with sweeps' runs and results."""
@@ -678,9 +687,7 @@ def reproduce_table1(
     base = PRESETS["tensioning"]
     steps = 2_000 if quick else base.total_timesteps
     n_eval = 3 if quick else 10
-    seeds = ([0] if quick else [0, 1, 2, 3, 4]) if seeds is None else list(dict.fromkeys(seeds))
-    for seed in seeds:
-        check_int("seed", seed, low=0)
+    seeds = _checked_seeds(([0] if quick else [0, 1, 2, 3, 4]) if seeds is None else seeds)
     # train_and_evaluate's own evaluation runs once, at the end, on one episode: every method
     # is scored below on the same episodes
     preset = replace(base, eval_freq=steps, n_eval_episodes=1)
@@ -864,9 +871,7 @@ def reproduce_table2(
     preset = PRESETS["linecutting"]
     radii = [None, 3.0, 1.5] if quick else list(PAPER_TABLE2)
     episodes, n_eval = (10, 5) if quick else (25, 15)
-    seeds = ([0] if quick else [0, 1, 2]) if seeds is None else list(dict.fromkeys(seeds))
-    for seed in seeds:
-        check_int("seed", seed, low=0)
+    seeds = _checked_seeds(([0] if quick else [0, 1, 2]) if seeds is None else seeds)
     out = Path(out_dir) / "table2"
     out.mkdir(parents=True, exist_ok=True)
     console.rule(f"[bold]Table 2: line cutting, {len(seeds)} seed(s), {episodes} episodes")
@@ -1454,9 +1459,7 @@ def reproduce(
         seeds = list(range(100, 100 + check_int("repeats", repeats, low=2)))
     if seeds is None:
         seeds = list(experiment.seeds[: experiment.quick_seeds] if quick else experiment.seeds)
-    seeds = list(dict.fromkeys(seeds))
-    for seed in seeds:
-        check_int("seed", seed, low=0)
+    seeds = _checked_seeds(seeds)
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
     labels, work = _jobs(experiment, panels, methods, seeds, quick)
