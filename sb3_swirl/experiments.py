@@ -130,12 +130,14 @@ def _checked_seeds(seeds: list[int]) -> list[int]:
 
 def _settings_stamp() -> dict[str, str]:
     """What a run depends on beyond its arguments: this package's version and a digest of the
-    shipped zoo configs (the tuned hyperparameters). Stored with sweeps' runs and results."""
+    shipped zoo configs (the tuned hyperparameters; their parsed entries, so that a comment or
+    a layout change leaves the stamp as it was). Stored with sweeps' runs and results."""
     from sb3_swirl import __version__
 
     digest = hashlib.sha256()
     for algo in ("dqn", "swirl_dqn"):
-        digest.update((files("sb3_swirl.zoo_configs") / f"{algo}.yml").read_bytes())
+        entries = yaml.safe_load((files("sb3_swirl.zoo_configs") / f"{algo}.yml").read_text())
+        digest.update(json.dumps(entries, sort_keys=True).encode())
     return {"sb3_swirl": __version__, "zoo_configs": digest.hexdigest()[:16]}
 
 

@@ -85,6 +85,26 @@ def test_resuming_runs_made_under_other_settings_warns(tmp_path, importable):
     assert results == [noisy(**job) for job in JOBS[:4]]
 
 
+def test_the_configs_stamp_reads_settings_not_comments(tmp_path, monkeypatch):
+    """A comment or a layout change in the shipped zoo configs keeps the stamp (so --resume
+    does not warn); a changed setting changes it."""
+    from importlib.resources import files
+
+    from sb3_swirl.experiments import _settings_stamp
+
+    shipped = {
+        a: (files("sb3_swirl.zoo_configs") / f"{a}.yml").read_text() for a in ("dqn", "swirl_dqn")
+    }
+    monkeypatch.setattr("sb3_swirl.experiments.files", lambda package: tmp_path)
+    for algo, text in shipped.items():
+        (tmp_path / f"{algo}.yml").write_text(text)
+    before = _settings_stamp()
+    (tmp_path / "dqn.yml").write_text("# a new comment\n" + shipped["dqn"].replace(": ", ":  "))
+    assert _settings_stamp() == before
+    (tmp_path / "dqn.yml").write_text(shipped["dqn"].replace("batch_size: 64", "batch_size: 65", 1))
+    assert "batch_size: 64" in shipped["dqn"] and _settings_stamp() != before
+
+
 def test_a_runs_file_that_cannot_be_appended_to_fails_before_any_run(tmp_path, monkeypatch):
     """Not after the first run, whose record would be lost (the permission is faked: root, as
     on CI, may write any file)."""
