@@ -1,9 +1,9 @@
 """n-step returns for ``Dict`` observations, which SB3's ``NStepReplayBuffer`` lacks.
 
-SwirlDQN needs n-step returns to keep what it cloned (README: "Why SwirlDQN unlearned"); SB3
-2.9 refuses them for ``Dict`` observation spaces (the goal-conditioned Fetch tasks). This
-buffer stores transitions as SB3's ``DictReplayBuffer`` and samples them as its
-``NStepReplayBuffer`` does: the same arithmetic, keyed observations.
+SwirlDQN needs n-step returns to keep what it cloned (docs/results.md, "The cause: 1-step TD
+values off the demos' path"); SB3 2.9 refuses them for ``Dict`` observation spaces (the
+goal-conditioned Fetch tasks). This buffer stores transitions as SB3's ``DictReplayBuffer``
+and samples them as its ``NStepReplayBuffer`` does: the same arithmetic, keyed observations.
 """
 
 from __future__ import annotations

@@ -236,7 +236,7 @@ class DemoWarning(UserWarning):
 
 
 # A demo whose typical step or length differs from the other demos' by more than this factor
-# is warned about (the README has how it was chosen and checked).
+# is warned about (docs/results.md, "Demos that do not match", has how it was chosen and checked).
 _RATE_FACTOR = 3.0
 # An entry farther from its dimension's median than this many times the dimension's spread is
 # a corrupted value, not data.
