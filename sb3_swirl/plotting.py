@@ -213,16 +213,17 @@ def plot_transitions(
         twin = ax.twinx()
         if len(z) > 2 * w:
             angle = np.degrees(turn_angles(z, w))
-            twin.plot(np.arange(w, len(z) - w), angle, color="tab:blue", lw=1.0)
+            # black and dotted: the regions' lines take tab10's colours
+            twin.plot(np.arange(w, len(z) - w), angle, "k:", lw=1.0, label="turn (right axis)")
         twin.set_ylim(0, 180)
-        twin.set_ylabel("turn (°)", color="tab:blue", fontsize="small")
+        twin.set_ylabel("turn (°)", fontsize="small")
         if candidates is not None and candidates[k]:
             steps = np.asarray(candidates[k], dtype=int)
             ax.plot(
                 steps,
                 speed[np.clip(steps - 1, 0, len(speed) - 1)],
                 "o",
-                color="tab:red",
+                color="black",
                 ms=4,
                 label=candidate_label,
             )
@@ -237,7 +238,7 @@ def plot_transitions(
         ax.set_xlim(0, len(z) - 1)
     axes[-1].set_xlabel("step")
     handles, labels = [], []
-    for ax in axes:
+    for ax in fig.axes:  # the panels and their twins
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             if lab not in labels:
                 handles.append(h)
