@@ -136,9 +136,16 @@ def _settings_stamp() -> dict[str, str]:
 
     digest = hashlib.sha256()
     for algo in ("dqn", "swirl_dqn"):
-        entries = yaml.safe_load((files("sb3_swirl.zoo_configs") / f"{algo}.yml").read_text())
-        digest.update(json.dumps(entries, sort_keys=True).encode())
+        digest.update(json.dumps(_shipped_entries(algo), sort_keys=True).encode())
     return {"sb3_swirl": __version__, "zoo_configs": digest.hexdigest()[:16]}
+
+
+def _shipped_entries(algo: str) -> dict[str, Any]:
+    """The parsed entries of the shipped ``zoo_configs/{algo}.yml``."""
+    path = files("sb3_swirl.zoo_configs") / f"{algo}.yml"
+    if not path.is_file():
+        raise ValueError(f"no zoo config for algorithm {algo!r} ({path})")
+    return yaml.safe_load(path.read_text())
 
 
 def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
@@ -147,12 +154,9 @@ def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
     Returns the rl-zoo entry as a dict: ``policy``, ``n_timesteps``, the algorithm's constructor
     arguments and, for ``swirl_dqn``, ``env_wrapper`` (the SWIRL wrapper's arguments).
     """
-    path = files("sb3_swirl.zoo_configs") / f"{algo}.yml"
-    if not path.is_file():
-        raise ValueError(f"no zoo config for algorithm {algo!r} ({path})")
-    entries = yaml.safe_load(path.read_text())
+    entries = _shipped_entries(algo)
     if env_id not in entries and "default" not in entries:
-        raise ValueError(f"{path.name} has no entry for {env_id} and no default")
+        raise ValueError(f"{algo}.yml has no entry for {env_id} and no default")
     return dict(entries.get(env_id, entries.get("default")))
 
 
