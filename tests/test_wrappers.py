@@ -300,8 +300,14 @@ def test_invalid_construction(make, message):
 
 def test_invalid_observation_spaces():
     task = line_task()
-    with pytest.raises(ValueError, match="1-D Box"):
+    with pytest.raises(ValueError, match=r"is an image.*low-dimensional state"):
         SwirlWrapper(_ImageEnv(), task)
+    with pytest.raises(ValueError, match=r"1-D Box.*FlattenObservation"):
+        SwirlWrapper(_ImageEnv(space=spaces.Box(-1.0, 1.0, (2, 2))), task)
+    with pytest.raises(ValueError, match="Box view of its integers"):
+        SwirlWrapper(_ImageEnv(space=spaces.MultiDiscrete([4, 4])), task)
+    with pytest.raises(ValueError, match=r"FlattenObservation.*one-hot"):
+        SwirlWrapper(_ImageEnv(space=spaces.Discrete(4)), task)
     no_obs_key = _ImageEnv(dict_keys=("state",))
     with pytest.raises(ValueError, match="no 'observation' key"):
         SwirlWrapper(no_obs_key, task)
@@ -310,12 +316,28 @@ def test_invalid_observation_spaces():
 
 
 class _ImageEnv(gym.Env):
-    def __init__(self, dict_keys=()):
-        box = spaces.Box(0, 255, (4, 4), dtype=np.uint8)
+    def __init__(self, dict_keys=(), space=None):
+        box = spaces.Box(0, 255, (4, 4), dtype=np.uint8) if space is None else space
         self.observation_space = (
             spaces.Dict({k: spaces.Box(-1.0, 1.0, (1,)) for k in dict_keys}) if dict_keys else box
         )
         self.action_space = spaces.Discrete(2)
+
+
+class _FlatGoalEnv(PointEnv):
+    """A goal env (it has ``compute_reward``) whose observations were flattened to a Box."""
+
+    def compute_reward(self, achieved_goal, desired_goal, info):
+        return -np.linalg.norm(np.subtract(achieved_goal, desired_goal), axis=-1)
+
+
+def test_a_goal_env_flattened_to_a_box_is_a_plain_env():
+    env = SwirlWrapper(_FlatGoalEnv(), line_task())
+    env.reset(seed=0)
+    obs, *_, info = env.step(1)
+    assert obs.shape == env.observation_space.shape and "segment_goal" not in info
+    with pytest.raises(AttributeError, match="not a goal env here"):
+        env.compute_reward(np.zeros(1), np.zeros(1), info)
 
 
 # ----------------------------------------------------------------------- checkers, pickling

@@ -104,10 +104,20 @@ def lift_observation_space(
         _check_state_space(state, task, name)
         segment = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
         return spaces.Dict({**space.spaces, SEGMENT_KEY: segment}), state_key
+    if isinstance(space, spaces.MultiDiscrete):
+        how = (
+            "give the env a Box view of its integers, which keeps their order (e.g. "
+            "gymnasium.wrappers.TransformObservation(env, lambda o: o.astype(np.float64), "
+            "Box(0, space.nvec - 1, dtype=np.float64)))"
+        )
+    else:
+        how = (
+            "wrap the env in gymnasium.wrappers.FlattenObservation first (a Discrete state "
+            "becomes one-hot)"
+        )
     raise ValueError(
         f"SWIRL wrappers need a Box or Dict observation space, got {type(space).__name__}; "
-        "wrap the env in gymnasium.wrappers.FlattenObservation first (a Discrete state "
-        "becomes one-hot) and record the demos' states the same way"
+        f"{how} and record the demos' states the same way"
     )
 
 
@@ -163,6 +173,13 @@ def state_space(
 
 
 def _check_state_space(space: gym.Space, task: TaskModel | None, name: str) -> None:
+    if isinstance(space, spaces.Box) and len(space.shape) > 1 and space.dtype == np.uint8:
+        raise ValueError(
+            f"{name} is an image, {space}: SWIRL's regions and rewards are Gaussians and "
+            "quadratics over a low-dimensional state, not pixels. Give the task such a state "
+            "(positions, angles, features you compute from the image), e.g. as a key of a "
+            "Dict observation beside the image (state_key=...)"
+        )
     if not isinstance(space, spaces.Box) or len(space.shape) != 1:
         raise ValueError(
             f"{name} must be a 1-D Box to hold the task state, got {space}; flatten it first "
@@ -391,7 +408,13 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         )
         if self.tracker.terminate_on_completion:
             _refuse_monitor_below(env)
-        self._goal_env = hasattr(env.unwrapped, "compute_reward")
+        # a goal env as HER sees one: compute_reward and Dict observations with the goal (a
+        # goal env flattened to a Box is a plain env here)
+        self._goal_env = (
+            hasattr(env.unwrapped, "compute_reward")
+            and isinstance(env.observation_space, spaces.Dict)
+            and "desired_goal" in env.observation_space.spaces
+        )
         goal_keys = getattr(env.unwrapped, "goal_keys", ("desired_goal",))
         self._reads_goal = [
             key
@@ -448,7 +471,10 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
             with, and relabelling one transition cannot redo that.
         """
         if not self._goal_env:
-            raise AttributeError(f"{type(self.env.unwrapped).__name__} is not a goal env")
+            raise AttributeError(
+                f"{type(self.env.unwrapped).__name__} is not a goal env here (it needs "
+                "compute_reward and Dict observations with a 'desired_goal' key)"
+            )
         infos = [info] if isinstance(info, dict) else list(info)
         recorded = [i.get(GOAL_KEY) for i in infos]
         if self._reads_goal and (
