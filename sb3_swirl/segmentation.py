@@ -1202,7 +1202,7 @@ or callable, default "gmm"
         if self.merge_same_dynamics:
             self._merge_same_dynamics(x)
         self.segments_, self.switches_ = self._segmentation(x, self.regions_)
-        self._check_complete(self.segments_)
+        self._check_complete(self.segments_, x)
         return self
 
     def _merge_same_dynamics(self, x: list[np.ndarray]) -> None:
@@ -1342,12 +1342,14 @@ or callable, default "gmm"
         message = ". ".join(p[0].upper() + p[1:] for p in parts) + f". To find more, {advice}"
         warnings.warn(message, SegmentationWarning, stacklevel=3)
 
-    def _check_complete(self, segments: list[np.ndarray]) -> None:
+    def _check_complete(self, segments: list[np.ndarray], x: list[np.ndarray]) -> None:
         """Raise unless enough demonstrations reach every region in order (after their start).
 
         Where the goal is the only region left, demonstrations that start inside it are not
         counted against the fit (with a warning) as long as at least half of them travel to
         it: the demos of a task of holding a state (balancing) end where a few of them begin.
+        The error says when the demonstrations end far apart (a goal that changes per episode),
+        the usual reason why they start inside the goal region.
         """
         problems, at_goal = [], []
         for n, bounds in enumerate(segments):
@@ -1363,11 +1365,29 @@ or callable, default "gmm"
         need = self._min_demos(len(segments))
         if complete + len(excused) < need:
             shown = "; ".join(problems[:5]) + ("; ..." if len(problems) > 5 else "")
+            ends = np.array([s[-1] for s in x])
+            end_spread = float(np.median(np.linalg.norm(ends - np.median(ends, axis=0), axis=1)))
+            travel = float(np.median([np.linalg.norm(s[-1] - s[0]) for s in x]))
+            path = float(np.median([np.linalg.norm(np.diff(s, axis=0), axis=1).sum() for s in x]))
+            # demos that head somewhere (not jitter in place) but not to one place
+            if at_goal and end_spread > 0.5 * travel and travel > 0.25 * path:
+                advice = (
+                    f"The demonstrations end in different places (their last states lie a "
+                    f"median {end_spread:.3g} from their middle, and they travel {travel:.3g}), "
+                    "so the goal region, fitted to where they end, holds their starts. "
+                    "SWIRL's last segment is one goal shared by every demonstration: where the "
+                    "goal changes per episode, give the task a state relative to the goal (the "
+                    "offset to it) or the state with the goal (on a Dict env, state_key="
+                    "['observation', 'desired_goal'])"
+                )
+            else:
+                advice = (
+                    "Do the demonstrations move? Otherwise lower min_demo_fraction or change "
+                    "the indicator or window"
+                )
             raise ValueError(
                 f"only {complete} of {len(segments)} demonstrations reach "
-                f"the {len(self.regions_)} regions in order, {need} needed ({shown}). Do the "
-                "demonstrations move? Otherwise lower min_demo_fraction or change the "
-                "indicator or window"
+                f"the {len(self.regions_)} regions in order, {need} needed ({shown}). {advice}"
             )
         if excused:
             warnings.warn(

@@ -546,3 +546,18 @@ def test_shared_course_dims_only_splits_when_some_dims_clearly_follow_a_shared_c
         for f in rng.uniform(20, 40, size=6)
     ]
     assert _shared_course_dims(swings) is None
+
+
+def test_demonstrations_that_end_apart_are_told_so():
+    """Demos that each head for their own goal (a goal env's) put their starts inside the
+    goal region fitted to their ends: the error says so, and what to give the task instead."""
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 1.0, 40)[:, None]
+    apart = [t * [np.cos(k), np.sin(k)] + rng.normal(scale=0.01, size=(40, 2)) for k in range(6)]
+    with pytest.raises(ValueError, match=r"starts inside.*end in different places.*desired_goal"):
+        TransitionStateClustering(random_state=0).fit(apart)
+    rng = np.random.default_rng(0)  # the still demos of the test above
+    still = [np.ones((20, 2)) + rng.normal(scale=1e-3, size=(20, 2)) for _ in range(4)]
+    with pytest.raises(ValueError) as still_error:
+        TransitionStateClustering(random_state=0).fit(still)
+    assert "different places" not in str(still_error.value)
