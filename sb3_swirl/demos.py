@@ -332,7 +332,11 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
     for n, (step, length) in enumerate(_rate_ratios(states, spread)):
         if _off(step, _RATE_FACTOR) and _off(length, 2.0) and (step > 1) != (length > 1):
             # steps and length off in opposite directions: the time axis is scaled
-            what, factor, why = "typical step", step, "recorded at another sampling rate"
+            what, factor, why = (
+                "typical step",
+                step,
+                "recorded at another sampling rate (or cut short where the others slow down)",
+            )
         elif _off(length, _RATE_FACTOR):
             what, factor, why = "number of steps", length, "incomplete, or at another rate"
         else:
@@ -387,7 +391,17 @@ def save_demos(demos: Any, path: str | os.PathLike) -> None:
     ----------
     demos : anything :func:`as_demonstrations` accepts
     path : str or path-like
+
+    Raises
+    ------
+    TypeError
+        If the arguments look swapped (a path first, then the demos).
     """
+    if isinstance(demos, str | os.PathLike) and not isinstance(path, str | os.PathLike):
+        raise TypeError(
+            f"save_demos(demos, path) takes the demos first; got the path {os.fspath(demos)!r} "
+            f"first and a {type(path).__name__} second"
+        )
     demos = as_demonstrations(demos)
     arrays: dict[str, np.ndarray] = {
         "format": np.array(_NPZ_FORMAT),

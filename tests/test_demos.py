@@ -92,6 +92,8 @@ def test_npz_round_trip_is_exact(tmp_path):
         Demonstration(rng.normal(size=(4, 2)), rng.normal(size=3), rng.normal(size=3)),
     ]
     path = tmp_path / "demos.npz"
+    with pytest.raises(TypeError, match="demos first"):
+        save_demos(path, demos)
     save_demos(demos, path)
     for loaded in (load_demos(path), as_demonstrations(path), as_demonstrations(str(path))):
         assert len(loaded) == 3
