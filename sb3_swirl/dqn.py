@@ -19,7 +19,7 @@ from sb3_swirl.demos import Demonstration, as_demonstrations, check_demos_fit_sp
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.inverse_dynamics import InverseDynamics
 from sb3_swirl.vec_env import get_swirl_attr
-from swirl_wrappers import Lifter, SegmentTracker, TaskModel
+from swirl_wrappers import Lifter, RewardConfig, SegmentTracker, TaskModel
 from swirl_wrappers._validation import check_bool, check_int, check_option, check_real
 from swirl_wrappers.wrappers import (
     GOAL_KEY,
@@ -319,6 +319,10 @@ class SwirlDQN(DQN):
                     "with; load without env=, then wrap the env with model.task"
                 )
             self.task = TaskModel.from_json(self.task_json)
+        if self.env is not None and self.task_json is not None:  # `load` with an env
+            saved = self.reward_config
+            self.reward_config = get_swirl_attr(self.env, "reward_config")
+            self._warn_reward_change(saved)
         extractor = self.policy_kwargs.get("features_extractor_class")
         if isinstance(extractor, type) and issubclass(extractor, RBFFeaturesExtractor):
             fe_kwargs = dict(self.policy_kwargs.get("features_extractor_kwargs") or {})
@@ -361,7 +365,20 @@ class SwirlDQN(DQN):
                 "the new environment's proxy task differs from the one this model was built "
                 "with (model.task); wrap the env with model.task, or start a new model"
             )
+        saved = self.reward_config
         self._take_task(None)  # and its reward settings, which replay the demos
+        self._warn_reward_change(saved)
+
+    def _warn_reward_change(self, saved: RewardConfig) -> None:
+        """Warn when the env's reward settings (now the model's) differ from ``saved``."""
+        if saved != self.reward_config:
+            warnings.warn(
+                f"the environment's SWIRL wrapper rewards with {self.reward_config}, but this "
+                f"model was trained with {saved}; it goes on with the environment's (the "
+                "demonstrations are rewarded the same way, the Q-values learnt so far were "
+                "not)",
+                stacklevel=3,
+            )
 
     # ------------------------------------------------------------------ hooks
     def _setup_learn(self, *args: Any, **kwargs: Any) -> tuple[int, Any]:

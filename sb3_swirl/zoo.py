@@ -28,6 +28,7 @@ the task saved in the model and prints the segment it is in.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import difflib
 import importlib
 import inspect
@@ -46,7 +47,7 @@ import numpy as np
 import yaml
 
 from sb3_swirl.demos import Demonstration, check_demos_fit_spaces, load_demos
-from swirl_wrappers import SwirlWrapper, TaskModel
+from swirl_wrappers import RewardConfig, SwirlWrapper, TaskModel
 from swirl_wrappers.wrappers import StateKey, state_space
 
 __all__ = ["RL_ZOO3_VERSION", "SwirlTaskWrapper", "check_config", "main", "register"]
@@ -555,7 +556,10 @@ def _saved_task(model_path: str) -> TaskModel:
     data, _, _ = load_from_zip_file(model_path, load_data=True, device="cpu")
     if not data or not data.get("task_json"):
         raise ValueError(f"{model_path} holds no SWIRL task (not a SwirlDQN model?)")
-    return TaskModel.from_json(data["task_json"])
+    task = TaskModel.from_json(data["task_json"])
+    if isinstance(data.get("reward_config"), RewardConfig):  # the reward it was trained with
+        task = dataclasses.replace(task, reward_config=data["reward_config"])
+    return task
 
 
 def _enjoy(argv: list[str]) -> int:

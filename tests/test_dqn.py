@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -144,6 +146,22 @@ def test_set_env_and_load_refuse_a_different_task(tmp_path):
         SwirlDQN.load(
             tmp_path / "model.zip", env=SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 60), moved)
         )
+
+
+def test_set_env_and_load_take_the_envs_reward_settings_with_a_warning(tmp_path):
+    potential = {"mode": "potential", "task_reward_weight": 10.0}
+    paid = SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 60), point_task(), potential)
+    model = SwirlDQN("MlpPolicy", paid, demonstrations=point_demos(2), seed=0)
+    model.save(tmp_path / "model.zip")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the same settings: no warning
+        assert SwirlDQN.load(tmp_path / "model.zip", env=paid).reward_config.potential
+    with pytest.warns(UserWarning, match="trained with RewardConfig"):
+        loaded = SwirlDQN.load(tmp_path / "model.zip", env=point_env())
+    assert not loaded.reward_config.potential  # the env's, as set_env takes them
+    with pytest.warns(UserWarning, match="trained with RewardConfig"):
+        model.set_env(point_env())
+    assert not model.reward_config.potential
 
 
 def test_a_batch_larger_than_the_demo_pairs_is_all_of_them():

@@ -3,6 +3,7 @@ TensorBoard and the zoo's plots, on tiny budgets."""
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import tomllib
 from pathlib import Path
@@ -113,7 +114,10 @@ def test_train_enjoy_tensorboard_and_plots_swirl_dqn_and_dqn(tmp_path, zoo_cli):
         assert (params / name).is_file(), name
     model = sb3_swirl.SwirlDQN.load(run / "sb3_swirl-ParallelParking-v0.zip", device="cpu")
     task = sb3_swirl.TaskModel.from_json(params / "task.json")
-    assert model.task.to_json() == task.to_json() and task.n_segments >= 2
+    # the model's task, with the reward settings it was trained with (the entry's)
+    trained = dataclasses.replace(model.task, reward_config=model.reward_config)
+    assert task.to_json() == trained.to_json() and task.n_segments >= 2
+    assert task.reward_config.potential and task.reward_config.task_reward_weight == 10.0
     config = yaml.load((params / "config.yml").read_text(), Loader=yaml.UnsafeLoader)
     assert dict(config)["prefill_replay"] is True
 
