@@ -390,6 +390,13 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
             np.all(np.asarray(d.actions) == np.round(d.actions)) for d in demos
         ):
             raise ValueError("1-D actions must be integers (a Discrete action space)")
+        for i, demo in enumerate(demos):
+            if discrete and len(demo) and np.min(demo.actions) < 0:
+                raise ValueError(
+                    f"demo {i}: action {int(np.min(demo.actions))} at step "
+                    f"{int(np.argmin(demo.actions))}; discrete actions are numbered 0 .. n - 1, "
+                    "as a Discrete action space numbers them (shift labels such as -1/0/+1)"
+                )
         if not discrete and self.dynamics is not None and callable(self.dynamics):
             raise ValueError(
                 "continuous actions: dynamics must be a linear model (A, B) or (A, B, c) in "

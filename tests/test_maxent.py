@@ -155,6 +155,11 @@ def test_state_only_demos_are_refused_naming_the_method():
         fit_task(demos, reward="maxent", reg_covar=0.1, random_state=0)
     with pytest.raises(ValueError, match="reward must be one of"):
         fit_task(demos, reward="maxentt")
+    shifted = [Demonstration(d.observations, d.actions - 1) for d in collect_demos(PARKING, 3)]
+    with pytest.raises(
+        ValueError, match=r"demo \d: action -1 at step \d+; .* numbered 0 \.\. n - 1"
+    ):
+        fit_task(shifted, reward="maxent", reg_covar=0.1, random_state=0)
     with pytest.raises(ValueError, match="makes 1000000 states"):
         rng = np.random.default_rng(0)
         MaxEntIRLRewardLearner(value_function="tabular", n_bins=10).fit(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import pickle
+import types
 
 import numpy as np
 import pytest
@@ -168,6 +169,8 @@ def test_segment_indices_matches_stepping(name):
         want.append(i)
     np.testing.assert_array_equal(got, want)
     assert np.all(np.diff(got) >= 0)
+    held = types.SimpleNamespace(observations=x)  # a demo object (Demonstration, Minari's)
+    np.testing.assert_array_equal(task.segment_indices(held), got)
     if task.features is None and task.regions[0].time_bounds is None:
         assert got[-1] == task.n_segments
 

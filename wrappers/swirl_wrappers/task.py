@@ -821,14 +821,16 @@ class TaskModel:
         x, index = self._checked(obs, index)
         return self.evaluate(x, None, index)[0]
 
-    def segment_indices(self, observations: np.ndarray) -> np.ndarray:
+    def segment_indices(self, observations: Any) -> np.ndarray:
         """Run the segmentation function along one trajectory of shape (T+1, obs_dim).
 
-        ``out[t]`` is the index after observing ``s_t`` (``t = 0``: the start state): the index
-        advances at the first step whose state lies in the next region, exactly as
-        :meth:`next_segment` and the wrappers advance it online, with the same arithmetic.
+        ``observations`` is the array, or a demonstration that holds it as ``.observations``
+        (``sb3_swirl.Demonstration``, a Minari episode). ``out[t]`` is the index after
+        observing ``s_t`` (``t = 0``: the start state): the index advances at the first step
+        whose state lies in the next region, exactly as :meth:`next_segment` and the wrappers
+        advance it online, with the same arithmetic.
         """
-        x = np.asarray(observations, dtype=np.float64)
+        x = np.asarray(getattr(observations, "observations", observations), dtype=np.float64)
         if x.ndim != 2:
             raise ValueError(f"observations must have shape (T+1, obs_dim), got {x.shape}")
         reached = self.reach_steps([x])[0]
