@@ -58,6 +58,14 @@ def _positive(text: str) -> int:
     return value
 
 
+def _n_demos(text: str) -> int:
+    """``demos -n``: SWIRL needs at least 2 demonstrations (checked before collecting)."""
+    value = _positive(text)
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"SWIRL needs at least 2 demonstrations, got {text!r}")
+    return value
+
+
 def _writable_folder(path: Path) -> None:
     """Raise unless files can be made in folder ``path`` (created if missing, as by mkdir -p)."""
     existing = path
@@ -96,6 +104,7 @@ def _cmd_demos(args: argparse.Namespace) -> int:
     _check_output(args.output)
     console.print(f"collecting {args.n} demos of {args.env_id}")
     demos = collect_demos(args.env_id, args.n, seed=args.seed, progress=not args.quiet)
+    Path(args.output).parent.mkdir(parents=True, exist_ok=True)
     save_demos(demos, args.output)
     lengths = [len(d) for d in demos]
     console.print(
@@ -135,6 +144,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
             random_state=args.seed,
             progress=lambda msg: status.update(msg),
         )
+    Path(args.output).parent.mkdir(parents=True, exist_ok=True)
     task.to_json(args.output)
     console.print(
         f"wrote a task with {task.n_segments} segment{'s' * (task.n_segments != 1)} to "
@@ -200,6 +210,9 @@ def _cmd_show(args: argparse.Namespace) -> int:
         )
     if args.plot is not None:
         _writable_folder(Path(args.plot))
+        for name in ("rewards.png", "segments.png", "transitions.png"):
+            if (Path(args.plot) / name).is_dir():
+                raise ValueError(f"cannot write {Path(args.plot) / name}: it is a folder")
     task = TaskModel.from_json(args.task)
     demos = None
     if args.demos is not None:  # read before anything is printed or written
@@ -287,7 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demos", help="generate supervisor demonstrations of a shipped env")
     p.add_argument("env_id", help="e.g. sb3_swirl/ParallelParking-v0")
-    p.add_argument("-n", type=_positive, default=5, help="number of demos (default 5)")
+    p.add_argument("-n", type=_n_demos, default=5, help="number of demos, 2 or more (default 5)")
     p.add_argument(
         "--seed", type=_seed, default=0, help="seeds the episodes and the supervisor (default 0)"
     )

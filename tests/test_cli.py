@@ -211,9 +211,17 @@ def test_fit_refuses_to_overwrite_its_own_input(tmp_path, capsys):
         ["fit", "{demos}", "-o", "{blocked}/task.json"],
         ["fit", "{demos}", "-o", "{folder}"],
         ["show", "{task}", "--plot", "{blocked}/figs"],
+        ["show", "{task}", "--plot", "{figs}"],
         ["demo", "parking", "--out", "{blocked}/results", "-q"],
     ],
-    ids=["demos", "fit", "fit into a folder", "show --plot", "demo --out"],
+    ids=[
+        "demos",
+        "fit",
+        "fit into a folder",
+        "show --plot",
+        "a folder in the way",
+        "demo --out",
+    ],
 )
 def test_an_unwritable_output_is_refused_before_any_work(tmp_path, capsys, command, monkeypatch):
     """A path under a regular file cannot be written, even by root."""
@@ -226,9 +234,13 @@ def test_an_unwritable_output_is_refused_before_any_work(tmp_path, capsys, comma
     blocked = tmp_path / "a_file"
     blocked.write_text("")
     args = [
-        a.format(blocked=blocked, demos=demos, task=task, folder=tmp_path / "dir") for a in command
+        a.format(
+            blocked=blocked, demos=demos, task=task, folder=tmp_path / "dir", figs=tmp_path / "figs"
+        )
+        for a in command
     ]
     (tmp_path / "dir").mkdir()
+    (tmp_path / "figs" / "segments.png").mkdir(parents=True)  # a folder where a plot goes
     no_work_targets = (
         "sb3_swirl.supervisors.collect_demos",
         "sb3_swirl.fitting.fit_task",
@@ -240,7 +252,23 @@ def test_an_unwritable_output_is_refused_before_any_work(tmp_path, capsys, comma
         monkeypatch.setattr(target, lambda *a, **k: pytest.fail("work started"))
     assert main(args) == 2
     err = capsys.readouterr().err
-    assert "not a folder" in err or "is a directory" in err, err
+    assert any(m in err for m in ("not a folder", "is a directory", "is a folder", "at least 2")), (
+        err
+    )
+
+
+def test_one_demo_is_refused_before_collecting(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("sb3_swirl.supervisors.collect_demos", lambda *a, **k: pytest.fail("work"))
+    with pytest.raises(SystemExit) as exit_:
+        main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "1", "-o", str(tmp_path / "x.npz")])
+    assert exit_.value.code == 2 and "at least 2 demonstrations" in capsys.readouterr().err
+
+
+def test_outputs_go_into_new_folders(tmp_path):
+    demos, task = tmp_path / "new" / "demos.npz", tmp_path / "newer" / "deep" / "task.json"
+    assert main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "2", "-o", str(demos), "-q"]) == 0
+    assert main(["fit", str(demos), "-o", str(task)]) == 0
+    assert demos.is_file() and task.is_file()
 
 
 def test_ctrl_c_prints_one_line_exits_130_and_leaves_no_file(tmp_path, capsys, monkeypatch):

@@ -70,6 +70,11 @@ def test_atomic_write_replaces_the_file_only_when_done(tmp_path):
     with pytest.raises(ValueError, match="mode"):
         with atomic_write(path, "a"):
             pass
+    # the path given is named, not the temporary file's
+    with pytest.raises(FileNotFoundError, match=r"missing.out\.txt: the folder .*missing"):
+        _task(0.0).to_json(tmp_path / "missing" / "out.txt")
+    with pytest.raises(IsADirectoryError, match="it is a folder"):
+        _task(0.0).to_json(tmp_path)
 
 
 def test_a_failed_write_leaves_the_previous_file_and_no_temporary_file(tmp_path, failing_writes):

@@ -27,6 +27,12 @@ def atomic_write(path: str | os.PathLike, mode: str = "w") -> Iterator[IO]:
     mode : {"w", "wb"}
         Text (UTF-8) or binary.
 
+    Raises
+    ------
+    IsADirectoryError, FileNotFoundError
+        If ``path`` is a folder, or its folder does not exist (named, before anything is
+        written).
+
     Examples
     --------
     >>> import os, tempfile
@@ -40,6 +46,10 @@ def atomic_write(path: str | os.PathLike, mode: str = "w") -> Iterator[IO]:
         raise ValueError(f"mode must be 'w' or 'wb', got {mode!r}")
     path = os.fspath(path)
     folder, name = os.path.split(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise IsADirectoryError(f"cannot write {path}: it is a folder")
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(f"cannot write {path}: the folder {folder} does not exist")
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, mode, encoding="utf-8" if mode == "w" else None) as fh:
