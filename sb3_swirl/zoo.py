@@ -414,10 +414,12 @@ def check_config(
     where = f"{path}, entry {name!r}"
     if not isinstance(entry, Mapping):
         raise ValueError(f"{where}: expected a mapping of hyperparameters, got {entry!r}")
-    entry = {**entry, **(overrides or {})}
     # rl_zoo3 passes env, seed, verbose, device and tensorboard_log itself
     passed = {"self", "env", "seed", "verbose", "device", "tensorboard_log", "_init_setup_model"}
-    _check_keys(where, entry, _ZOO_KEYS | set(inspect.signature(ALGOS[algo]).parameters) - passed)
+    allowed = _ZOO_KEYS | set(inspect.signature(ALGOS[algo]).parameters) - passed
+    _check_keys("-params", overrides or {}, allowed)
+    _check_keys(where, entry, allowed)
+    entry = {**entry, **(overrides or {})}
     wrappers = entry.get("env_wrapper") or []
     specs = [
         dict(next(iter(w.values())) or {})
@@ -493,8 +495,15 @@ def _train(argv: list[str]) -> int:
                     "task_reward_weight) would not reach the sub-processes; use the default "
                     "--vec-env dummy (Optuna's --n-jobs runs trials in parallel)"
                 )
-            # rl_zoo3's -params key:value ... overrides
-            overrides = _parsed(argv, "-params", "--hyperparams", nargs="+", action=StoreDict)
+            # rl_zoo3's -params key:value ... overrides (each value eval'd, as rl_zoo3 does)
+            try:
+                overrides = _parsed(argv, "-params", "--hyperparams", nargs="+", action=StoreDict)
+            except (NameError, SyntaxError, ValueError) as exc:
+                raise ValueError(
+                    f"-params: {exc}; give key:value pairs, each value a Python expression "
+                    "(learning_rate:1e-4 exploration_fraction:0.2 "
+                    'policy_kwargs:"dict(net_arch=[64, 64])")'
+                ) from None
             entry = check_config(algo, str(env_id), config, overrides)
         except ValueError as exc:  # before anything trains: one clear line, no traceback
             print(f"error: {exc}", file=sys.stderr)
@@ -503,7 +512,17 @@ def _train(argv: list[str]) -> int:
         # `enjoy` get those of the command line): pass them on the command line too
         if entry.get("env_kwargs") and _option(argv, "--env-kwargs") is None:
             argv = [*argv, "--env-kwargs", *(f"{k}:{v!r}" for k, v in entry["env_kwargs"].items())]
-    _run(train, "train", argv)
+    try:
+        _run(train, "train", argv)
+    except ValueError as exc:  # e.g. a hyperparameter's value the algorithm refuses
+        hint = ""
+        if "proxy task differs" in str(exc):
+            hint = (
+                " (with -i, the entry's demos and fit must give the task the model was "
+                "trained with)"
+            )
+        print(f"error: {exc}{hint}", file=sys.stderr)
+        return 2
     if algo == "swirl_dqn":
         _write_task(argv, str(env_id))
     return 0

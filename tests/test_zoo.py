@@ -209,6 +209,24 @@ def test_bad_yaml_fails_before_training_naming_the_problem(
 
 
 @pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        (["bc_epoch:3"], "-params: unknown key 'bc_epoch' (did you mean 'bc_epochs'?)"),
+        (["learning_rate:abc"], "-params: name 'abc' is not defined; give key:value pairs"),
+        (["bc_epochs:-3"], "bc_epochs must be an integer >= 0, got -3"),
+    ],
+)
+def test_bad_params_are_one_line_naming_the_option(tmp_path, monkeypatch, capsys, params, message):
+    monkeypatch.chdir(tmp_path)
+    _mountaincar_demos(tmp_path / "mountaincar_demos.npz", n=2)
+    (tmp_path / "mine.yml").write_text(yaml.safe_dump({"MountainCar-v0": MOUNTAINCAR_ENTRY}))
+    args = ["train", "--algo", "swirl_dqn", "--env", "MountainCar-v0", "-conf", "mine.yml"]
+    assert zoo.main([*args, "-f", "logs", "-n", "100", "-params", *params]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and "mine.yml" not in err, err
+
+
+@pytest.mark.parametrize(
     ("argv", "message"),
     [
         (["--env", "ParallelParking-v0"], "Did you mean 'sb3_swirl/ParallelParking-v0'?"),
