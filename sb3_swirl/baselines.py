@@ -20,6 +20,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from sklearn.exceptions import NotFittedError
 
 from sb3_swirl.demos import Demonstration
 from swirl_wrappers import Lifter, TaskModel, observation_state
@@ -101,6 +102,8 @@ class BCPolicy:
         """The cloned action for one observation (d,) or a batch (n, d), as SB3's ``predict``
         returns it (the second item, SB3's recurrent state, is always None). ``Dict``
         observations are read with ``state_key``."""
+        if not hasattr(self, "model_"):
+            raise NotFittedError("This BCPolicy instance is not fitted yet: call fit first")
         if isinstance(observation, dict):
             observation = observation_state(observation, self.state_key or "observation")
         x = np.asarray(observation, dtype=np.float64)

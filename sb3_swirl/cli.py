@@ -319,7 +319,13 @@ def build_parser() -> argparse.ArgumentParser:
         "well locally linear dynamics explain the demos), velocity, linear, ruptures (needs "
         "the ruptures package), or several joined by '+'",
     )
-    p.add_argument("--window", type=int, default=None, help="window length of the indicator")
+    p.add_argument(
+        "--window",
+        type=int,
+        default=None,
+        help="window length of the indicator (default 3 for gmm and velocity; linear: "
+        "max(2 (dims + 1), 8))",
+    )
     p.add_argument(
         "--min-demo-fraction",
         type=float,
@@ -331,8 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--reg-covar",
         type=float,
         default=None,
-        help="floor of each region's covariance, relative to each axis's variance "
-        "(few demos: raise it; parking with 5 demos: 0.1)",
+        help="floor of each region's covariance, relative to each axis's variance (default "
+        "1e-4; few demos: raise it; parking with 5 demos: 0.1)",
     )
     p.add_argument(
         "--no-merge-fragments",
@@ -378,14 +384,22 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="write rewards.png (with --demos also segments.png, transitions.png)",
     )
-    p.add_argument("--demos", default=None, help="demos .npz to draw in segments.png")
+    p.add_argument(
+        "--demos", default=None, help="demos .npz to draw in segments.png and transitions.png"
+    )
     p.set_defaults(func=_cmd_show)
 
     p = sub.add_parser("demo", help="the main job: SWIRL vs DQN on a shipped task")
-    p.add_argument("task", choices=sorted(PRESETS))
-    p.add_argument("--seed", type=_seed, default=0, help="seed of the demos and agents")
+    p.add_argument("task", choices=sorted(PRESETS), metavar="TASK", help=", ".join(sorted(PRESETS)))
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the demos and agents (default 0)")
     p.add_argument("--n-demos", type=int, default=None, help="default: the task's (5 on parking)")
-    p.add_argument("--timesteps", type=int, default=None, help="training steps per method")
+    p.add_argument(
+        "--timesteps",
+        type=int,
+        default=None,
+        help="training steps per method (default: the task's, 30000 on parking; fewer for a "
+        "quick look)",
+    )
     p.add_argument("--out", default="results", help="output folder (default results/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_demo)

@@ -385,7 +385,8 @@ def train_and_evaluate(
     best = max(curve, key=lambda p: p["success_rate"], default=None)
     return {
         "algo": algo,
-        "hyperparams": hyperparams,
+        # the settings this run used: its own budget, not the entry's n_timesteps
+        "hyperparams": {**hyperparams, "n_timesteps": total_timesteps},
         "curve": curve,
         "final_success": curve[-1]["success_rate"] if curve else float("nan"),
         "best_success": best["success_rate"] if best else float("nan"),

@@ -624,7 +624,11 @@ def main(argv: list[str] | None = None) -> int:
     scripts = ("train", "enjoy", "plot_train", "all_plots", "plot_from_file")
     if not argv or argv[0] not in scripts:
         print(f"usage: sb3-swirl zoo {{{','.join(scripts)}}} [rl_zoo3 arguments, see -h]")
-        return 0 if argv[:1] in (["-h"], ["--help"]) else 2
+        if argv[:1] in (["-h"], ["--help"]):
+            return 0
+        what = f"unknown script {argv[0]!r}" if argv else "no script given"
+        print(f"error: {what}; choose one of {', '.join(scripts)}", file=sys.stderr)
+        return 2
     import sb3_swirl  # noqa: F401  (registers the sb3_swirl/ envs)
 
     register()

@@ -6,6 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from sklearn.exceptions import NotFittedError
 
 from sb3_swirl.baselines import GOAL_ENV_METHODS, METHODS, BCPolicy, run_method
 from sb3_swirl.demos import Demonstration
@@ -48,6 +49,8 @@ def test_linear_svm_clones_the_parking_supervisor(demos):
     """The paper's parking BC baseline (hinge loss, L2 alpha 5e-3) fits the demos well."""
     x = np.concatenate([d.observations[:-1] for d in demos])
     y = np.concatenate([d.actions for d in demos])
+    with pytest.raises(NotFittedError, match="BCPolicy instance is not fitted yet"):
+        BCPolicy("linear_svm").predict(x)
     policy = BCPolicy("linear_svm", random_state=0).fit(x, y)
     assert np.mean(policy.predict(x)[0] == y) >= 0.9
 

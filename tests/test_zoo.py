@@ -297,3 +297,9 @@ def test_a_trials_swirl_settings_reach_the_wrapper_and_the_agent():
     assert task.metadata["segmentation"]["params"]["reg_covar"] == 0.05
     model = sb3_swirl.SwirlDQN("MlpPolicy", env, **params)
     assert len(model.demonstrations) == 3
+
+
+def test_an_unknown_zoo_script_is_named(capsys):
+    assert zoo.main(["bogus"]) == 2
+    assert "unknown script 'bogus'; choose one of train, enjoy" in capsys.readouterr().err
+    assert zoo.main(["-h"]) == 0
