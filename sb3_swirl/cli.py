@@ -210,7 +210,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
         )
     if args.plot is not None:
         _writable_folder(Path(args.plot))
-        for name in ("rewards.png", "segments.png", "transitions.png"):
+        names = ["rewards.png"] + (["segments.png", "transitions.png"] if args.demos else [])
+        for name in names:
             if (Path(args.plot) / name).is_dir():
                 raise ValueError(f"cannot write {Path(args.plot) / name}: it is a folder")
     task = TaskModel.from_json(args.task)

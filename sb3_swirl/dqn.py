@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Sequence
 from typing import Any, ClassVar, Literal
@@ -30,6 +31,12 @@ from swirl_wrappers.wrappers import (
 )
 
 __all__ = ["SwirlDQN"]
+
+
+def _proxy_task(task: TaskModel) -> str:
+    """The task's regions and rewards as JSON, without its reward settings: those the env's
+    wrapper pays by may differ (a model adopts them, with a warning)."""
+    return dataclasses.replace(task, reward_config=RewardConfig()).to_json()
 
 
 class SwirlDQN(DQN):
@@ -246,14 +253,30 @@ class SwirlDQN(DQN):
         self.reward_config = get_swirl_attr(self.env, "reward_config")
         self.terminate_on_completion = get_swirl_attr(self.env, "terminate_on_completion")
         self.task_json = self.task.to_json()
-        if task is not None and task.to_json() != self.task_json:
+        if task is not None and _proxy_task(task) != _proxy_task(self.task):
             raise ValueError("task differs from the task carried by the environment")
+
+    def _check_settings(self, saved: RewardConfig, stacklevel: int) -> None:
+        """Warn when the env's reward settings (now the model's) differ from ``saved``, the
+        ones the model was trained with, and when its shaping discounts otherwise."""
+        if saved != self.reward_config:
+            already = (
+                "the Q-values and the demo transitions replayed so far were learnt with the old"
+                if self._bc_done
+                else "the demonstrations will be rewarded the same way; the Q-values learnt "
+                "so far were not"
+            )
+            warnings.warn(
+                f"the environment's SWIRL wrapper rewards with {self.reward_config}, but this "
+                f"model was trained with {saved}; it goes on with the environment's ({already})",
+                stacklevel=stacklevel,
+            )
         if self.reward_config.potential and self.reward_config.gamma != self.gamma:
             warnings.warn(
                 f"the SWIRL wrapper shapes with gamma={self.reward_config.gamma} but SwirlDQN "
                 f"discounts with gamma={self.gamma}: the potential shaping is "
                 "policy-invariant only when they are equal",
-                stacklevel=3,
+                stacklevel=stacklevel,
             )
 
     def _check_demonstrations(self) -> None:
@@ -310,19 +333,20 @@ class SwirlDQN(DQN):
         return out
 
     def _setup_model(self) -> None:
-        if self.task_json is not None and (
-            self.task is None or self.task.to_json() != self.task_json
-        ):
-            if self.task is not None:  # `load` with an env, as set_env refuses it
+        if self.task_json is not None:
+            saved = TaskModel.from_json(self.task_json)
+            if self.task is None:  # `load` without an env
+                self.task = saved
+            elif _proxy_task(self.task) != _proxy_task(saved):  # `load` with an env
                 raise ValueError(
                     "the environment's proxy task differs from the one this model was trained "
                     "with; load without env=, then wrap the env with model.task"
                 )
-            self.task = TaskModel.from_json(self.task_json)
-        if self.env is not None and self.task_json is not None:  # `load` with an env
-            saved = self.reward_config
-            self.reward_config = get_swirl_attr(self.env, "reward_config")
-            self._warn_reward_change(saved)
+        if self.env is not None:  # built, or loaded with an env: the env's settings count
+            trained_with = self.reward_config
+            self._take_task(None)
+            # called from __init__ or load, which the user called
+            self._check_settings(trained_with, stacklevel=4)
         extractor = self.policy_kwargs.get("features_extractor_class")
         if isinstance(extractor, type) and issubclass(extractor, RBFFeaturesExtractor):
             fe_kwargs = dict(self.policy_kwargs.get("features_extractor_kwargs") or {})
@@ -358,27 +382,17 @@ class SwirlDQN(DQN):
         problem.
         """
         super().set_env(env, force_reset)
-        if self.task_json is not None and (
-            get_swirl_attr(self.env, "task").to_json() != self.task_json  # type: ignore[arg-type]
+        new_task = get_swirl_attr(self.env, "task")  # type: ignore[arg-type]
+        if self.task_json is not None and _proxy_task(new_task) != _proxy_task(
+            TaskModel.from_json(self.task_json)
         ):
             raise ValueError(
                 "the new environment's proxy task differs from the one this model was built "
                 "with (model.task); wrap the env with model.task, or start a new model"
             )
-        saved = self.reward_config
+        trained_with = self.reward_config
         self._take_task(None)  # and its reward settings, which replay the demos
-        self._warn_reward_change(saved)
-
-    def _warn_reward_change(self, saved: RewardConfig) -> None:
-        """Warn when the env's reward settings (now the model's) differ from ``saved``."""
-        if saved != self.reward_config:
-            warnings.warn(
-                f"the environment's SWIRL wrapper rewards with {self.reward_config}, but this "
-                f"model was trained with {saved}; it goes on with the environment's (the "
-                "demonstrations are rewarded the same way, the Q-values learnt so far were "
-                "not)",
-                stacklevel=3,
-            )
+        self._check_settings(trained_with, stacklevel=3)
 
     # ------------------------------------------------------------------ hooks
     def _setup_learn(self, *args: Any, **kwargs: Any) -> tuple[int, Any]:

@@ -37,6 +37,7 @@ import os
 import sys
 import tempfile
 import threading
+import traceback
 from collections.abc import Iterator, Mapping
 from importlib.resources import files
 from pathlib import Path
@@ -498,7 +499,7 @@ def _train(argv: list[str]) -> int:
             # rl_zoo3's -params key:value ... overrides (each value eval'd, as rl_zoo3 does)
             try:
                 overrides = _parsed(argv, "-params", "--hyperparams", nargs="+", action=StoreDict)
-            except (NameError, SyntaxError, ValueError) as exc:
+            except Exception as exc:  # rl_zoo3 eval()s each value: any error is the user's text
                 raise ValueError(
                     f"-params: {exc}; give key:value pairs, each value a Python expression "
                     "(learning_rate:1e-4 exploration_fraction:0.2 "
@@ -514,7 +515,9 @@ def _train(argv: list[str]) -> int:
             argv = [*argv, "--env-kwargs", *(f"{k}:{v!r}" for k, v in entry["env_kwargs"].items())]
     try:
         _run(train, "train", argv)
-    except ValueError as exc:  # e.g. a hyperparameter's value the algorithm refuses
+    except ValueError as exc:  # a setting the algorithm refuses: before training, one line
+        if _raised_in_learn(exc):
+            raise
         hint = ""
         if "proxy task differs" in str(exc):
             hint = (
@@ -526,6 +529,11 @@ def _train(argv: list[str]) -> int:
     if algo == "swirl_dqn":
         _write_task(argv, str(env_id))
     return 0
+
+
+def _raised_in_learn(exc: BaseException) -> bool:
+    """Whether ``exc`` came from inside an algorithm's ``learn`` (training had started)."""
+    return any(frame.name == "learn" for frame in traceback.extract_tb(exc.__traceback__))
 
 
 def _parsed(argv: list[str], *names: str, **kwargs: Any) -> Any:

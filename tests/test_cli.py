@@ -240,7 +240,7 @@ def test_an_unwritable_output_is_refused_before_any_work(tmp_path, capsys, comma
         for a in command
     ]
     (tmp_path / "dir").mkdir()
-    (tmp_path / "figs" / "segments.png").mkdir(parents=True)  # a folder where a plot goes
+    (tmp_path / "figs" / "rewards.png").mkdir(parents=True)  # a folder where a plot goes
     no_work_targets = (
         "sb3_swirl.supervisors.collect_demos",
         "sb3_swirl.fitting.fit_task",
@@ -252,9 +252,7 @@ def test_an_unwritable_output_is_refused_before_any_work(tmp_path, capsys, comma
         monkeypatch.setattr(target, lambda *a, **k: pytest.fail("work started"))
     assert main(args) == 2
     err = capsys.readouterr().err
-    assert any(m in err for m in ("not a folder", "is a directory", "is a folder", "at least 2")), (
-        err
-    )
+    assert any(m in err for m in ("not a folder", "is a directory", "is a folder")), err
 
 
 def test_one_demo_is_refused_before_collecting(tmp_path, capsys, monkeypatch):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import gymnasium as gym
@@ -17,7 +18,7 @@ from sb3_swirl.dqn import SwirlDQN
 from sb3_swirl.experiments import PRESETS
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.vec_env import get_swirl_attr, make_swirl_env
-from swirl_wrappers import QuadraticReward, Region, SwirlWrapper, TaskModel
+from swirl_wrappers import QuadraticReward, Region, RewardConfig, SwirlWrapper, TaskModel
 
 PARKING = "sb3_swirl/ParallelParking-v0"
 # tiny networks: extra threads only contend for the CPU cores
@@ -149,19 +150,28 @@ def test_set_env_and_load_refuse_a_different_task(tmp_path):
 
 
 def test_set_env_and_load_take_the_envs_reward_settings_with_a_warning(tmp_path):
-    potential = {"mode": "potential", "task_reward_weight": 10.0}
+    potential = {"mode": "potential", "task_reward_weight": 10.0, "gamma": 0.9}
     paid = SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 60), point_task(), potential)
-    model = SwirlDQN("MlpPolicy", paid, demonstrations=point_demos(2), seed=0)
+    model = SwirlDQN("MlpPolicy", paid, demonstrations=point_demos(2), gamma=0.9, seed=0)
     model.save(tmp_path / "model.zip")
     with warnings.catch_warnings():
-        warnings.simplefilter("error")  # the same settings: no warning
+        warnings.simplefilter("error")  # the same settings (gamma 0.9, saved): no warning
         assert SwirlDQN.load(tmp_path / "model.zip", env=paid).reward_config.potential
-    with pytest.warns(UserWarning, match="trained with RewardConfig"):
-        loaded = SwirlDQN.load(tmp_path / "model.zip", env=point_env())
+        # a task file that carries the reward settings (the zoo's task.json) is the same task
+        carried = dataclasses.replace(point_task(), reward_config=RewardConfig(**potential))
+        SwirlDQN.load(tmp_path / "model.zip", env=SwirlWrapper(PointEnv(), carried))
+    with pytest.warns(UserWarning, match="trained with RewardConfig") as caught:
+        loaded = SwirlDQN.load(tmp_path / "model.zip", env=point_env(terminate_on_completion=True))
     assert not loaded.reward_config.potential  # the env's, as set_env takes them
-    with pytest.warns(UserWarning, match="trained with RewardConfig"):
+    assert loaded.terminate_on_completion and caught[0].filename == __file__
+    with pytest.warns(UserWarning, match="trained with RewardConfig") as caught:
         model.set_env(point_env())
-    assert not model.reward_config.potential
+    assert not model.reward_config.potential and caught[0].filename == __file__
+    shaped = SwirlWrapper(PointEnv(), point_task(), {"mode": "potential", "gamma": 0.99})
+    with pytest.warns(
+        UserWarning, match="shapes with gamma=0.99 but SwirlDQN discounts with gamma=0.9"
+    ):
+        model.set_env(shaped)
 
 
 def test_a_batch_larger_than_the_demo_pairs_is_all_of_them():

@@ -75,6 +75,8 @@ def test_atomic_write_replaces_the_file_only_when_done(tmp_path):
         _task(0.0).to_json(tmp_path / "missing" / "out.txt")
     with pytest.raises(IsADirectoryError, match="it is a folder"):
         _task(0.0).to_json(tmp_path)
+    with pytest.raises(NotADirectoryError, match=r"out\.txt is not a folder"):
+        _task(0.0).to_json(path / "inside.json")  # under a file
 
 
 def test_a_failed_write_leaves_the_previous_file_and_no_temporary_file(tmp_path, failing_writes):

@@ -303,3 +303,19 @@ def test_an_unknown_zoo_script_is_named(capsys):
     assert zoo.main(["bogus"]) == 2
     assert "unknown script 'bogus'; choose one of train, enjoy" in capsys.readouterr().err
     assert zoo.main(["-h"]) == 0
+
+
+def test_only_errors_before_training_are_shortened():
+    """A ValueError from inside ``learn`` keeps its traceback (a failure mid-run is not a
+    setting the user mistyped)."""
+
+    def learn():
+        raise ValueError("mid-run")
+
+    def __init__():
+        raise ValueError("bad setting")
+
+    for function, inside in ((learn, True), (__init__, False)):
+        with pytest.raises(ValueError) as error:
+            function()
+        assert zoo._raised_in_learn(error.value) is inside

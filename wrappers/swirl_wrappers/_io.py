@@ -29,9 +29,9 @@ def atomic_write(path: str | os.PathLike, mode: str = "w") -> Iterator[IO]:
 
     Raises
     ------
-    IsADirectoryError, FileNotFoundError
-        If ``path`` is a folder, or its folder does not exist (named, before anything is
-        written).
+    IsADirectoryError, NotADirectoryError, FileNotFoundError
+        If ``path`` is a folder, its folder is a file, or its folder does not exist (named,
+        before anything is written).
 
     Examples
     --------
@@ -48,6 +48,8 @@ def atomic_write(path: str | os.PathLike, mode: str = "w") -> Iterator[IO]:
     folder, name = os.path.split(os.path.abspath(path))
     if os.path.isdir(path):
         raise IsADirectoryError(f"cannot write {path}: it is a folder")
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise NotADirectoryError(f"cannot write {path}: {folder} is not a folder")
     if not os.path.isdir(folder):
         raise FileNotFoundError(f"cannot write {path}: the folder {folder} does not exist")
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{name}.", suffix=".tmp")

@@ -462,7 +462,8 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         Raises
         ------
         AttributeError
-            If the wrapped env is not a goal env (has no ``compute_reward``).
+            If the wrapped env is not a goal env (has no ``compute_reward``, or its
+            observations are not a Dict with a ``"desired_goal"`` key).
         ValueError
             For a goal other than the step's when the task reads the goal (its
             ``state_entries`` fall in a key among the env's ``goal_keys``, default
