@@ -15,8 +15,10 @@ reported as ``terminated``), and robosuite's default end-effector controller doe
 
 from __future__ import annotations
 
+import atexit
 import os
 import sys
+import weakref
 from collections import OrderedDict
 from typing import Any, ClassVar
 
@@ -28,6 +30,14 @@ import numpy as np
 # backend the user chose (MUJOCO_GL set before this) is kept.
 if sys.platform.startswith("linux"):
     os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+def _close_renderer(ref: weakref.ref) -> None:
+    """Close a renderer that is still open (its env was never closed)."""
+    renderer = ref()
+    if renderer is not None:
+        renderer.close()
+
 
 #: robosuite robots that stand in for the dVRK's patient-side manipulator. Only the Panda is
 #: tuned and tested: with the same settings the UR5e tracked lines 0.8 cm off and the Sawyer
@@ -305,12 +315,18 @@ class RobosuiteStepEnv(gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass one to the constructor")
             return None
-        if self._renderer is None:
-            import mujoco
+        import mujoco
 
+        if self._renderer is None:
             height, width = self.render_size
             self._renderer = mujoco.Renderer(self.sim.model._model, height, width)
-        self._renderer.update_scene(self.sim.data._data, camera=self.camera)
+            # closed with the env, or at exit before mujoco ends EGL (its own atexit hook,
+            # registered earlier, runs later)
+            atexit.register(_close_renderer, weakref.ref(self._renderer))
+        # robosuite's collision shapes (geom group 0) would hide the meshes
+        shown = mujoco.MjvOption()
+        shown.geomgroup[0] = 0
+        self._renderer.update_scene(self.sim.data._data, camera=self.camera, scene_option=shown)
         return self._renderer.render()
 
     def close(self) -> None:

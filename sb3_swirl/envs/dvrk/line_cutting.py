@@ -79,7 +79,8 @@ def _build_task(base: type) -> type:
     class LineCuttingTask(base):
         """robosuite scene: the arm over a table with a marked line (visual only)."""
 
-        view = ((0.2, -0.12, TABLE_TOP + 0.22), (0.0, -0.01, TABLE_TOP))
+        #: from the front left, above the start: the line and the tool at its end
+        view = ((-0.05, -0.18, TABLE_TOP + 0.12), (0.005, -0.01, TABLE_TOP))
 
         def __init__(self, line_shape: np.ndarray, **kwargs: Any) -> None:
             self.line_shape = line_shape
@@ -94,7 +95,7 @@ def _build_task(base: type) -> type:
                     new_geom(
                         name=f"line_{i}",
                         type="capsule",
-                        size=(0.0008,),
+                        size=(0.0015,),
                         fromto=f"{p[0]} {p[1]} 0 {q[0]} {q[1]} 0",
                         rgba=(0.05, 0.05, 0.05, 1.0),
                         contype=0,

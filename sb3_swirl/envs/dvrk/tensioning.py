@@ -37,9 +37,13 @@ def _build_task(base: type) -> type:
 
     import mujoco
     from robosuite.models.tasks import ManipulationTask
+    from robosuite.utils.mjcf_utils import new_geom
 
     class TensioningTask(base):
         """robosuite scene: the arm over a gauze sheet pinned at its two far corners."""
+
+        #: from the front right, above: the pins, the sheet and the hand that pulls it
+        view = ((0.12, -0.16, TABLE_TOP + 0.13), (-0.01, 0.0, TABLE_TOP + 0.035))
 
         def _load_model(self) -> None:
             super()._load_model()
@@ -50,7 +54,7 @@ def _build_task(base: type) -> type:
                 ET.fromstring(
                     f'<flexcomp name="gauze" type="grid" count="{GRID} {GRID} 1" '
                     f'spacing="{SPACING} {SPACING} {SPACING}" pos="0 0 {TABLE_TOP + PIN_HEIGHT}" '
-                    'radius="0.002" mass="0.1" dim="2" rgba="0.92 0.92 0.86 1">'
+                    'radius="0.002" mass="0.1" dim="2" rgba="0.62 0.76 0.92 1">'
                     # high friction, like gauze on the paper's silicone pad: with 1 the part
                     # lying on the table slides and the sheet bunches up under the pins
                     '<contact condim="3" friction="2 0.005 0.0001" solref="0.01 1" '
@@ -60,6 +64,25 @@ def _build_task(base: type) -> type:
                     "</flexcomp>"
                 )
             )
+            # the two pins, drawn as posts (visual only: no contact, no mass)
+            for y in (-1.0, 1.0):
+                arena.worldbody.append(
+                    new_geom(
+                        name=f"pin_post_{int(y > 0)}",
+                        type="cylinder",
+                        size=(0.0015, PIN_HEIGHT / 2),
+                        pos=(
+                            SPACING * (GRID - 1) / 2,
+                            y * SPACING * (GRID - 1) / 2,
+                            TABLE_TOP + PIN_HEIGHT / 2,
+                        ),
+                        rgba=(0.25, 0.25, 0.25, 1.0),
+                        contype=0,
+                        conaffinity=0,
+                        group=1,
+                        density=0,
+                    )
+                )
             self.model = ManipulationTask(
                 mujoco_arena=arena, mujoco_robots=[r.robot_model for r in self.robots]
             )
