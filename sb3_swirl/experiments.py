@@ -56,8 +56,11 @@ class Preset:
     eval_freq: int
     n_eval_episodes: int
     target_success: float
-    #: the two observation axes ``segments.png`` draws
+    #: the two observation axes ``segments.png`` draws, and the observation's entries' names
     plot_dims: tuple[int, int] = (0, 1)
+    names: tuple[str, ...] | None = None
+    #: the demo's table also gives the final true return (the task's score beside success)
+    return_column: bool = False
 
     @property
     def swirl(self) -> dict[str, Any]:
@@ -91,13 +94,40 @@ class Preset:
 
 
 PRESETS: dict[str, Preset] = {
-    "parking": Preset("sb3_swirl/ParallelParking-v0", 1_000, 20, 0.95),
+    "parking": Preset(
+        "sb3_swirl/ParallelParking-v0",
+        1_000,
+        20,
+        0.95,
+        names=("x (m)", "y (m)", "heading (rad)", "speed (m/s)"),
+    ),
     # evaluation episodes are up to 1000 steps: evaluate less often
     "acrobot": Preset("sb3_swirl/NoisyAcrobot-v0", 10_000, 10, 0.95),
     # the paper's §10.2: demos on straight lines at random positions; the agent learns on one
-    "linecutting": Preset("sb3_swirl/DVRKLineCutting-v0", 500, 10, 0.95),
+    "linecutting": Preset(
+        "sb3_swirl/DVRKLineCutting-v0",
+        500,
+        10,
+        0.95,
+        names=("x (cm)", "y (cm)", "offset from the line (cm)"),
+    ),
     # the paper's §10.1; the segments seen from the side (x, height): reach down, lift, pull
-    "tensioning": Preset("sb3_swirl/DVRKTensioning-v0", 2_000, 5, 0.95, plot_dims=(0, 2)),
+    "tensioning": Preset(
+        "sb3_swirl/DVRKTensioning-v0",
+        2_000,
+        5,
+        0.95,
+        plot_dims=(0, 2),
+        names=(
+            "x (cm)",
+            "y (cm)",
+            "height (cm)",
+            "gripper closed",
+            "wrist load (N)",
+            "disparity (cm²)",
+        ),
+        return_column=True,  # Table 1's value
+    ),
     # gymnasium-robotics' Fetch tasks, to 90% success; the segments drawn over the goal's
     # offset from the gripper (reach: x, y), the object's (push: x, y; pick-and-place: x, z)
     "fetchreach": Preset("sb3_swirl/FetchReachDiscrete-v0", 1_000, 20, 0.9),
@@ -405,6 +435,8 @@ def write_results(results: dict[str, Any], path: str | Path) -> None:
 def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path) -> None:
     """Success rate and true return against training episodes, one line per method (the
     paper's Fig. 2; the return is what Table 1 reports for tensioning)."""
+    from matplotlib.ticker import MaxNLocator
+
     from sb3_swirl.plotting import _finish, _new_figure
 
     fig = _new_figure((11, 4))
@@ -412,9 +444,10 @@ def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path)
     labels = {"swirl_dqn": "SWIRL (SwirlDQN)", "dqn": "DQN"}
     for run in runs:
         episodes = [p["episodes"] for p in run["curve"]]
+        size = 3 if len(episodes) > 2 else 7  # a short run's few evaluations stay visible
         for ax, key in ((success_ax, "success_rate"), (return_ax, "task_return")):
             values = [p[key] for p in run["curve"]]
-            ax.plot(episodes, values, marker="o", markersize=3, label=labels[run["algo"]])
+            ax.plot(episodes, values, marker="o", markersize=size, label=labels[run["algo"]])
     success_ax.axhline(
         preset.target_success, color="grey", linestyle="--", linewidth=1, label="target"
     )
@@ -423,6 +456,7 @@ def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path)
     return_ax.set_ylabel("true return (mean over eval episodes)")
     for ax in (success_ax, return_ax):
         ax.set_xlabel("training episodes (rollouts)")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.grid(alpha=0.3)
         ax.legend(loc="best")
     fig.suptitle(f"{preset.env_id}: {preset.n_demos} demos")
@@ -518,7 +552,7 @@ def run_demo(
     fit_time = time.perf_counter() - fit_start
     console.print(f"SWIRL found {_segments(task)} in {fit_time:.1f} s")
     task.to_json(out / "task.json")
-    plot_segments(demos, task, preset.plot_dims, path=out / "segments.png")
+    plot_segments(demos, task, preset.plot_dims, names=preset.names, path=out / "segments.png")
 
     runs = []
     for algo in ("swirl_dqn", "dqn"):
@@ -577,15 +611,19 @@ def run_demo(
     table.add_column(f"rollouts to {preset.target_success:.0%} success", justify="right")
     table.add_column("best success (at rollout)", justify="right")
     table.add_column("final success", justify="right")
+    if preset.return_column:
+        table.add_column("final true return", justify="right")
     table.add_column("wall time", justify="right")
     for run in runs:
         reached = run["rollouts_to_target"]
+        final_return = [f"{run['curve'][-1]['task_return']:.1f}"] if preset.return_column else []
         table.add_row(
             run["algo"],
             "not reached" if reached is None else str(reached),
             f"{run['best_success']:.0%}"
             + (f" ({run['best_success_episodes']})" if run["best_success"] > 0 else ""),
             f"{run['final_success']:.0%}",
+            *final_return,
             f"{run['wall_time_s']:.0f} s",
         )
     _table_console().print(table)
@@ -607,7 +645,7 @@ PAPER_TABLE1 = {
 _TABLE1_LABELS = {
     "rl": "pure exploration (DQN)",
     "bc": "pure demonstration (BC)",
-    "segmented_bc": "segmented demonstrations (BC per segment)",
+    "segmented_bc": "segmented demonstrations (BC on the lifted state)",
     "swirl": "SWIRL (BC start + rollouts)",
     "swirl_no_bc": "SWIRL without the BC start",
     "supervisor": "the demonstrator (our supervisor)",
@@ -792,15 +830,21 @@ def reproduce_table1(
     path = out / _output_name("results", ".json", quick)
     write_results(results, path)
 
-    table = Table(title=f"Table 1, gauze tensioning ({len(seeds)} seed(s) × {n_eval} episodes)")
-    for column in ("method", "value (mean ± std over seeds)", "flat at the end", "grasped"):
+    table = Table(
+        title=f"Table 1, gauze tensioning ({len(seeds)} seed(s) × {n_eval} episodes)",
+        caption="value: minus the disparity (cm²) summed over the episode; the paper's is in units "
+        "it does not state, so compare ratios, not values",
+    )
+    spread = len(seeds) > 1
+    value = "value (mean ± std over seeds)" if spread else "value"
+    for column in ("method", value, "flat at the end", "grasped"):
         table.add_column(column, justify="left" if column == "method" else "right")
     table.add_column("paper", justify="right")
     for name, row in summary.items():
         paper = row["paper_value"]
         table.add_row(
             _TABLE1_LABELS[name],
-            f"{row['value_mean']:.1f} ± {row['value_std']:.1f}",
+            f"{row['value_mean']:.1f}" + (f" ± {row['value_std']:.1f}" if spread else ""),
             f"{row['success_rate']:.0%}",
             f"{row['grasp_rate']:.0%}",
             "—" if paper is None else f"{paper:.0f}",
@@ -809,7 +853,14 @@ def reproduce_table1(
     console.print(
         f"SWIRL's value is {gain:.1%} better than segmented BC's "
         f"(paper: {results['paper_swirl_gain_over_segmented_bc']:.1%}); "
-        f"SWIRL found {segments} segments. Wrote {path}"
+        f"SWIRL found {', '.join(map(str, segments))} segments"
+        + (" (per seed)" if spread else "")
+        + (
+            ". A --quick run (few episodes) checks the pipeline; it is not the result"
+            if quick
+            else ""
+        )
+        + f". Wrote {path}"
     )
     return results
 
@@ -840,7 +891,7 @@ def _score_cuts(policy: Any, env: gym.Env, seeds: list[int]) -> dict[str, Any]:
             tracking.append(info["tracking_error_cm"])
     return {
         "success_rate": float(np.mean(successes)),
-        "cut_rate": len(position) / len(seeds),
+        "began_cut_rate": len(position) / len(seeds),
         "position_error_cm": float(np.mean(position)) if position else None,
         "tracking_error_cm": float(np.mean(tracking)) if tracking else None,
     }
@@ -881,7 +932,9 @@ def reproduce_table2(
     seeds = _checked_seeds(([0] if quick else [0, 1, 2]) if seeds is None else seeds)
     out = Path(out_dir) / "table2"
     out.mkdir(parents=True, exist_ok=True)
-    console.rule(f"[bold]Table 2: line cutting, {len(seeds)} seed(s), {episodes} episodes")
+    console.rule(
+        f"[bold]Table 2: line cutting, {len(seeds)} seed(s), {episodes} episodes of exploration"
+    )
 
     runs: list[dict[str, Any]] = []
     for seed in seeds:
@@ -931,7 +984,12 @@ def reproduce_table2(
         for method in ("svm", "swirl"):
             entry[method] = {
                 key: mean([r[method][key] for r in rows])
-                for key in ("success_rate", "cut_rate", "position_error_cm", "tracking_error_cm")
+                for key in (
+                    "success_rate",
+                    "began_cut_rate",
+                    "position_error_cm",
+                    "tracking_error_cm",
+                )
             }
         summary.append(entry)
     combined = sum(round(r["swirl"]["success_rate"] * n_eval) for r in runs)
@@ -957,7 +1015,10 @@ def reproduce_table2(
         return "—" if value is None else f"{value:.2f}"
 
     table = Table(
-        title=f"Table 2, line cutting ({len(seeds)} seed(s) × {n_eval} episodes); errors in cm"
+        title=f"Table 2, line cutting ({len(seeds)} seed(s) × {n_eval} greedy episodes per line, "
+        f"after {episodes} of exploration); errors in cm",
+        caption="cut: the share of episodes that start within 1 cm of the line and never leave "
+        "it by more than 1 cm; pos / track: the errors of the episodes that began a cut",
     )
     columns = ("line", "SVM cut", "SVM pos / track", "SWIRL cut", "SWIRL pos / track")
     for column in (*columns, "paper SVM", "paper SWIRL"):
@@ -975,7 +1036,15 @@ def reproduce_table2(
         )
     _table_console().print(table)
     console.print(
-        f"SWIRL cut {combined} of {n_eval * len(runs)} lines (paper: 11 of 15). Wrote {path}"
+        f"SWIRL cut the line in {combined} of {n_eval * len(runs)} episodes ({len(runs)} lines × "
+        f"{n_eval}, one line at a time; the paper's 11 of 15 were trials on sequences of lines "
+        "and curves, on gauze)"
+        + (
+            ". A --quick run (few episodes) checks the pipeline; it is not the result"
+            if quick
+            else ""
+        )
+        + f". Wrote {path}"
     )
     return results
 

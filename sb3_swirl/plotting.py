@@ -6,6 +6,7 @@ under the Agg backend; every function returns the Figure and saves it when given
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -41,14 +42,19 @@ def _finish(fig: Figure, path: str | os.PathLike | None) -> Figure:
     return fig
 
 
-def _axis_names(task: TaskModel) -> list[str]:
+def _axis_names(task: TaskModel, names: Sequence[str] | None = None) -> list[str]:
+    """The task-space axes' names, from the observation's (``names``, else ``obs[i]``)."""
+
+    def name(i: int) -> str:
+        return names[i] if names is not None and i < len(names) else f"obs[{i}]"
+
     if task.features is not None:
         return [f"feature {j}" for j in range(task.task_dim)]
     if task.dims is not None:
-        sums = ["+".join(f"obs[{i}]" for i in angle) for angle in task.angles or ()]
+        sums = ["+".join(name(i) for i in angle) for angle in task.angles or ()]
         trig = [f"{f}({phi})" for phi in sums for f in ("cos", "sin")]
-        return trig + [f"obs[{d}]" for d in task.dims]
-    return [f"obs[{j}]" for j in range(task.task_dim)]
+        return trig + [name(d) for d in task.dims]
+    return [name(j) for j in range(task.task_dim)]
 
 
 def _check_task(task: Any) -> None:
@@ -69,6 +75,7 @@ def plot_segments(
     task: TaskModel,
     dims: tuple[int, int] = (0, 1),
     *,
+    names: Sequence[str] | None = None,
     ax: Axes | None = None,
     path: str | os.PathLike | None = None,
 ) -> Figure:
@@ -86,6 +93,8 @@ def plot_segments(
     task : TaskModel
     dims : (int, int)
         Task-space axes to draw (after the task's ``dims`` selection and feature map).
+    names : sequence of str, optional
+        Names of the observation's entries for the axis labels (default ``obs[i]``).
     ax : matplotlib Axes, optional
         Draw into this axes instead of a new figure.
     path : str or path-like, optional
@@ -146,9 +155,9 @@ def plot_segments(
         ax.plot([], [], color=colors[i], lw=2, label=f"segment {i}")
     if any((task.segment_indices(d.observations)[:-1] == task.n_segments).any() for d in demos):
         ax.plot([], [], color=colors[-1], lw=2, label="after the last region")
-    names = _axis_names(task)
-    ax.set_xlabel(names[a])
-    ax.set_ylabel(names[b])
+    axis_names = _axis_names(task, names)
+    ax.set_xlabel(axis_names[a])
+    ax.set_ylabel(axis_names[b])
     ax.set_title(f"{len(demos)} demonstrations, {_segments(task)}")
     ax.autoscale_view()
     ax.set_aspect("equal", adjustable="datalim")
@@ -358,31 +367,39 @@ def plot_sheet(
     """One greedy episode of a policy on the gauze (tensioning): the sheet and its signals.
 
     Left, the sheet seen from the side (x, z) at the start and at the end of the episode, with
-    the tool's path; right, the disparity, the wrist load and the tool height over the episode
-    (the signals of the paper's Fig. 11). ``env`` is a (possibly wrapped)
+    the tool's path and the 3 x 3 markers whose heights give the disparity; right, the
+    disparity, the wrist load and the tool height over the episode (the signals of the paper's
+    Fig. 11), with the SWIRL segment switches where ``env`` is a
+    :class:`~swirl_wrappers.SwirlWrapper`. ``env`` is a (possibly wrapped)
     :class:`~sb3_swirl.envs.dvrk.DVRKTensioningEnv`, reset with ``seed``.
     """
+    from matplotlib.ticker import SymmetricalLogLocator
+
     from sb3_swirl.envs.dvrk._robosuite import TABLE_TOP
-    from sb3_swirl.envs.dvrk.tensioning import GRID
+    from sb3_swirl.envs.dvrk.tensioning import GRID, MARKERS
 
     base = env.unwrapped
-    obs, _ = env.reset(seed=seed)
+    obs, info = env.reset(seed=seed)
     start = base.vertices
     signals = [np.asarray(obs[:6], dtype=float)]
+    segments = [info.get("segment")]  # the SWIRL segment, where the env is wrapped
     while True:
         action, _ = model.predict(obs, deterministic=True)
         obs, _, terminated, truncated, info = env.step(int(action))
         signals.append(np.asarray(obs[:6], dtype=float))
+        segments.append(info.get("segment"))
         if terminated or truncated:
             break
     signals = np.array(signals)
-    fig = _new_figure((11, 4))
+    fig = _new_figure((11, 4.6))
     side, over_time = fig.subplots(1, 2)
     for vertices, color, label in ((start, "0.6", "start"), (base.vertices, "C0", "end")):
         grid = ((vertices - [0.0, 0.0, TABLE_TOP]) * 100.0).reshape(GRID, GRID, 3)
         for j in range(GRID):  # each column of the grid, from the free edge to the pins
             side.plot(grid[:, j, 0], grid[:, j, 2], color=color, linewidth=1, alpha=0.8)
         side.plot([], [], color=color, label=f"sheet at the {label}")
+    markers = (base.vertices[list(MARKERS)] - [0.0, 0.0, TABLE_TOP]) * 100.0
+    side.plot(markers[:, 0], markers[:, 2], "C3.", label="markers (their heights' variance)")
     side.plot(signals[:, 0], signals[:, 2], "k:", linewidth=1, label="tool path")
     side.axhline(0.0, color="saddlebrown", linewidth=2, label="table")
     side.set_aspect("equal")
@@ -390,16 +407,31 @@ def plot_sheet(
     side.set_ylabel("height above the table (cm)")
     outcome = "flat" if info.get("is_success") else "not flat"
     side.set_title(f"gauze from the side: {outcome}, disparity {info['disparity_cm2']:.3f} cm²")
-    side.legend(loc="upper left", fontsize=8)
+    side.legend(loc="upper center", bbox_to_anchor=(0.5, -0.18), ncols=3, fontsize=8)
     steps = np.arange(len(signals))
     over_time.plot(steps, signals[:, 5], label="disparity (cm²)")
     over_time.plot(steps, signals[:, 4], label="wrist load (N)")
     over_time.plot(steps, signals[:, 2], label="tool height (cm)")
     over_time.plot(steps, signals[:, 3], label="gripper closed")
+    switches = [t for t in range(1, len(segments)) if segments[t] != segments[t - 1]]
+    for k, t in enumerate(switches):
+        over_time.axvline(
+            t,
+            color="0.4",
+            linestyle="--",
+            linewidth=1,
+            label="SWIRL segment switch" if k == 0 else None,
+        )
     over_time.set_yscale("symlog", linthresh=0.1)
+    over_time.set_ylim(bottom=0.0)  # every signal is >= 0
+    over_time.yaxis.set_minor_locator(
+        SymmetricalLogLocator(base=10, linthresh=0.1, subs=np.arange(2, 10))
+    )
     over_time.set_xlabel("step")
+    over_time.set_ylabel("each signal in its unit (symlog scale)")
     over_time.set_title("signals over the episode (greedy policy)")
-    over_time.legend(loc="best", fontsize=8)
+    over_time.legend(loc="upper center", bbox_to_anchor=(0.5, -0.18), ncols=3, fontsize=8)
     for ax in (side, over_time):
         ax.grid(alpha=0.3)
+        ax.grid(alpha=0.15, which="minor")
     return _finish(fig, path)

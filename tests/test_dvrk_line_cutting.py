@@ -214,6 +214,7 @@ def test_leaving_the_line_fails_the_cut_which_goes_on_to_the_end(env):
         ({"line_start": (1.0, 2.0, 3.0)}, "line_start"),
         ({"line_jitter": -1.0}, "line_jitter"),
         ({"render_mode": "human"}, "render_mode"),
+        ({"signed_distance": "no"}, "signed_distance must be True or False, got 'no'"),
     ],
 )
 def test_bad_constructor_values(kwargs, match):
@@ -319,5 +320,5 @@ def test_reproduce_table2_quick(tmp_path):
     assert [entry["radius_cm"] for entry in results["summary"]] == [None, 3.0, 1.5]
     for run in results["runs"]:
         for method in ("svm", "swirl"):
-            assert 0.0 <= run[method]["success_rate"] <= run[method]["cut_rate"] <= 1.0
+            assert 0.0 <= run[method]["success_rate"] <= run[method]["began_cut_rate"] <= 1.0
     assert results["swirl_successes"][1] == 15

@@ -34,6 +34,9 @@ def test_plot_segments_draws_demos_and_region_ellipses(fitted, tmp_path):
     outlined = [e for e in ellipses if e.get_facecolor()[3] == 0]
     np.testing.assert_allclose(outlined[0].center, task.regions[0].mean[[0, 2]])
     assert (tmp_path / "segments.png").stat().st_size > 1000
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("obs[0]", "obs[2]")
+    named = plot_segments(demos, task, dims=(0, 2), names=["x (m)", "y (m)", "z (m)"]).axes[0]
+    assert (named.get_xlabel(), named.get_ylabel()) == ("x (m)", "z (m)")
 
 
 def test_plot_rewards_has_one_heat_map_per_segment(fitted, tmp_path):

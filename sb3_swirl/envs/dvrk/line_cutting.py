@@ -8,7 +8,7 @@ import numpy as np
 from gymnasium import spaces
 
 from sb3_swirl.envs.dvrk._robosuite import TABLE_TOP, RobosuiteStepEnv, robosuite_task
-from swirl_wrappers._validation import check_real
+from swirl_wrappers._validation import check_bool, check_real
 
 #: Action indices of :class:`DVRKLineCuttingEnv`: one 2 mm step of the tool.
 PLUS_X, MINUS_X, PLUS_Y, MINUS_Y = range(4)
@@ -159,7 +159,7 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
     Parameters
     ----------
     radius : float, optional
-        Radius of the line in cm; ``None`` (default) for a straight line.
+        Radius of the line in cm, 1 to 100; ``None`` (default) for a straight line.
     line_start : (float, float), default (-2.0, -1.0)
         Start of the line (cm, relative to the table centre).
     line_jitter : float, default 0.0
@@ -196,7 +196,8 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
         render_mode: str | None = None,
     ) -> None:
         if radius is not None:
-            radius = check_real("radius", radius, low=0.5, high=100.0)
+            # a 5 cm arc closes on itself below 0.8 cm
+            radius = check_real("radius", radius, low=1.0, high=100.0)
         line_jitter = check_real("line_jitter", line_jitter, low=0.0, high=3.0)
         start = np.asarray(line_start, dtype=np.float64)
         if start.shape != (2,) or not np.all(np.abs(start) <= 5.0):
@@ -205,7 +206,7 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
                 f"got {line_start!r}"
             )
         self.radius = radius
-        self.signed_distance = bool(signed_distance)
+        self.signed_distance = check_bool("signed_distance", signed_distance)
         self.line_start = start / 100.0
         self.line_jitter = line_jitter / 100.0
         self._shape = line_points(None if radius is None else radius / 100.0, self.line_length)
