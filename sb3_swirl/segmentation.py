@@ -1368,9 +1368,9 @@ or callable, default "gmm"
             ends = np.array([s[-1] for s in x])
             end_spread = float(np.median(np.linalg.norm(ends - np.median(ends, axis=0), axis=1)))
             travel = float(np.median([np.linalg.norm(s[-1] - s[0]) for s in x]))
-            path = float(np.median([np.linalg.norm(np.diff(s, axis=0), axis=1).sum() for s in x]))
+            walked = float(np.median([np.linalg.norm(np.diff(s, axis=0), axis=1).sum() for s in x]))
             # demos that head somewhere (not jitter in place) but not to one place
-            if goal_only and at_goal and end_spread > 0.5 * travel and travel > 0.25 * path:
+            if goal_only and at_goal and end_spread > 0.5 * travel and travel > 0.25 * walked:
                 advice = (
                     f"The demonstrations end in different places (their last states lie a "
                     f"median {end_spread:.3g} from their middle, and they travel {travel:.3g}), "
