@@ -381,15 +381,15 @@ class SwirlDQN(DQN):
         env that segments or rewards by another task would silently train on a different
         problem.
         """
-        super().set_env(env, force_reset)
-        new_task = get_swirl_attr(self.env, "task")  # type: ignore[arg-type]
-        if self.task_json is not None and _proxy_task(new_task) != _proxy_task(
+        env = self._wrap_env(env, self.verbose)  # a VecEnv, as SB3's set_env makes it
+        if self.task_json is not None and _proxy_task(get_swirl_attr(env, "task")) != _proxy_task(
             TaskModel.from_json(self.task_json)
-        ):
+        ):  # refused before the model takes the env
             raise ValueError(
                 "the new environment's proxy task differs from the one this model was built "
                 "with (model.task); wrap the env with model.task, or start a new model"
             )
+        super().set_env(env, force_reset)
         trained_with = self.reward_config
         self._take_task(None)  # and its reward settings, which replay the demos
         self._check_settings(trained_with, stacklevel=3)

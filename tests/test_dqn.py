@@ -139,8 +139,10 @@ def test_set_env_and_load_refuse_a_different_task(tmp_path):
         regions=[Region(mean=[0.5, 0.0], covariance=np.eye(2) * 0.01, threshold=1.0)] * 2,
         rewards=[QuadraticReward(target=[0.5, 0.0], weight=np.eye(2))] * 2,
     )
+    kept = model.env
     with pytest.raises(ValueError, match="differs"):
         model.set_env(SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 60), moved))
+    assert model.env is kept  # the refused env was not taken
     model.save(tmp_path / "model.zip")
     assert SwirlDQN.load(tmp_path / "model.zip", env=point_env()).task.to_json() == model.task_json
     with pytest.raises(ValueError, match=r"differs .* load without env="):
