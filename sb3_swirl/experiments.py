@@ -12,6 +12,7 @@ import json
 import math
 import statistics
 import sys
+import textwrap
 import time
 import warnings
 from dataclasses import asdict, dataclass, field, replace
@@ -1205,7 +1206,11 @@ def _curve_panels(
         "parking": Panel("parking, 5 demos", "parking", _PARKING, parking),
         "acrobot": Panel("acrobot, 15 demos", "acrobot", _ACROBOT, acrobot, run=run),
         "underactuated_acrobot": Panel(
-            "under-actuated acrobot, 15 demos", "acrobot", _UNDERACTUATED, acrobot, run=run
+            "under-actuated acrobot, 15 demos (not in the paper)",
+            "acrobot",
+            _UNDERACTUATED,
+            acrobot,
+            run=run,
         ),
     }
 
@@ -1266,7 +1271,11 @@ EXPERIMENTS: dict[str, Experiment] = {
                 )
                 for name, title, env_id in (
                     ("acrobot", "acrobot", _ACROBOT),
-                    ("underactuated_acrobot", "under-actuated acrobot", _UNDERACTUATED),
+                    (
+                        "underactuated_acrobot",
+                        "under-actuated acrobot (not in the paper)",
+                        _UNDERACTUATED,
+                    ),
                 )
             },
         },
@@ -1338,7 +1347,11 @@ EXPERIMENTS: dict[str, Experiment] = {
             )
             for name, title, env_id in (
                 ("acrobot", "acrobot", _ACROBOT),
-                ("underactuated_acrobot", "under-actuated acrobot", _UNDERACTUATED),
+                (
+                    "underactuated_acrobot",
+                    "under-actuated acrobot (not in the paper)",
+                    _UNDERACTUATED,
+                ),
             )
         },
         _methods("dqn", "bc_rbf_svm", "global_irl", "swirl"),
@@ -1370,7 +1383,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             ),
             # not in the paper: a one-step memory, the regions and rewards unchanged
             "parking_partial_displacement": Panel(
-                "parking, velocity hidden, last step's displacement seen",
+                "parking, last step's displacement seen (not in the paper)",
                 "parking",
                 "sb3_swirl/ParallelParkingPartialDisplacement-v0",
                 250_000,
@@ -1541,6 +1554,8 @@ def reproduce(
     labels, work = _jobs(experiment, panels, methods, seeds, quick)
     stamp = _settings_stamp()
     console.rule(f"[bold]{experiment.title}: {len(work)} run{'s' * (len(work) != 1)}, {backend}")
+    if quick:
+        console.print(_quick_note(experiment))
     records = run_sweep(
         method_run,
         work,
@@ -1580,7 +1595,10 @@ def reproduce(
     figure = out / _output_name("figure", ".png", quick)
     write_results(results, saved)
     _plot_experiment(experiment, panels, methods, runs, figure, quick)
-    console.print(f"paper: {experiment.claim}", soft_wrap=True)
+    claim = experiment.claim
+    console.print(
+        claim if claim.startswith("(not in the paper)") else f"paper: {claim}", soft_wrap=True
+    )
     console.print(f"wrote {saved}, {figure.name}", soft_wrap=True)
     return results
 
@@ -1615,10 +1633,10 @@ def _ratio_line(row: dict[str, Any], counted: str = "rollouts") -> str:
     head = f"{where}: {counted} to {row['seeds'][0]['target']:.0%}, {names}:"
     if row["median"] is None:
         return f"{head} unresolved (half the {n} seeds or more have no upper bound)"
+    iqr = f"IQR {row['q25']:.3f}-{row['q75']:.3f}; " if n > 1 else ""
     return (
         f"{head} median {row['bound']} {row['median']:.3f} over {n} seed{'s' * (n != 1)} "
-        f"(IQR {row['q25']:.3f}-{row['q75']:.3f}; "
-        f"reached: {row['ours_reached']} / {row['theirs_reached']} seeds)"
+        f"({iqr}reached: {row['ours_reached']} / {row['theirs_reached']} seeds)"
     )
 
 
@@ -1642,6 +1660,15 @@ def _print_summary(experiment: Experiment, summary: list[dict[str, Any]]) -> Non
             f"{row['reached_target']}/{row['seeds']}",
         )
     _table_console().print(table)
+
+
+def _quick_note(experiment: Experiment) -> str:
+    """What a ``--quick`` run of ``experiment`` runs instead of the title's setting."""
+    demos = sorted(
+        {p.quick_run["n_demos"] for p in experiment.panels.values() if "n_demos" in p.quick_run}
+    )
+    fewer = f"{', '.join(map(str, demos))} demos, " if demos else ""
+    return f"--quick run ({fewer}small budgets): not the paper's setting"
 
 
 def _band(values: np.ndarray, spread: str) -> tuple[np.ndarray, np.ndarray]:
@@ -1674,6 +1701,7 @@ def _plot_experiment(
         xs = list(dict.fromkeys(r["x"] for r in mine))
         named = any(isinstance(x, str) for x in xs)
         ends: list[float] = []  # the rollouts each learning curve ran
+        banded = False  # a shaded band over more than one seed was drawn
         width = 0.8 / len(methods)
         for i, label in enumerate(methods):
             these = [r for r in mine if r["label"] == label]
@@ -1698,6 +1726,7 @@ def _plot_experiment(
                 else:
                     ax.plot(xs, mean, label=text, **style)
                     ax.fill_between(xs, low, high, color=color, alpha=0.15)
+                    banded |= any(len(f) > 1 for f in finals)
                 continue
             curves = [r["curve"] for r in these]
             n = min(len(c) for c in curves)
@@ -1710,24 +1739,28 @@ def _plot_experiment(
             ax.plot(episodes, success.mean(axis=0), label=text, **style)
             band = _band(success, experiment.spread)
             ax.fill_between(episodes, *band, color=color, alpha=0.15)
+            banded |= len(success) > 1
             ends.append(episodes[-1])
-        # budgets far apart (Fig. 2: 1M steps) and reaching 100 rollouts or more: a log axis
-        if ends and max(ends) >= 100 and max(ends) > 5 * max(min(ends), 1):
+        # budgets far apart (Fig. 2: 1M steps) and reaching 1000 rollouts or more: a log axis
+        if ends and max(ends) >= 1000 and max(ends) > 5 * max(min(ends), 1):
             ax.set_xscale("symlog", linthresh=10)
             ax.xaxis.set_major_formatter(ScalarFormatter())  # 1000, not 10³
         if named:
             ax.set_xticks(np.arange(len(xs)), xs)
         elif xs != [None]:
             ax.set_xticks(xs)
-        ax.set_title(experiment.panels[name].title)
+        ax.set_title(textwrap.fill(experiment.panels[name].title, 48))  # a panel's width
         ax.set_xlabel(experiment.x_label)
         ax.set_ylabel("true success rate")
         ax.set_ylim(-0.02, 1.05)
         ax.grid(alpha=0.3)
+        if banded:
+            spread = "mean ± 2 std" if experiment.spread == "2std" else "min to max"
+            ax.fill_between([], [], [], color="0.5", alpha=0.15, label=f"{spread} over seeds")
         ax.legend(loc="best", fontsize="small")
     title = experiment.title
     if quick:
-        title = f"--quick run (small budgets, not the paper's setting): {title}"
+        title = f"{title}\n{_quick_note(experiment)}"
     fig.suptitle(title, fontsize="medium")
     _finish(fig, path)
 

@@ -1325,8 +1325,12 @@ or callable, default "gmm"
             parts.append(
                 f"no transition region: the indicator proposed {n_candidates} candidate "
                 f"transitions in {sum(len(t) > 0 for t in self.transitions_)} of {n} demos, "
-                f"and all {len(self.dropped_regions_)} candidate regions were dropped "
-                f"({'; '.join(reasons)}; {threshold}), so the task has one segment to the goal"
+                + (
+                    "and the one candidate region was dropped "
+                    if len(self.dropped_regions_) == 1
+                    else f"and all {len(self.dropped_regions_)} candidate regions were dropped "
+                )
+                + f"({'; '.join(reasons)}; {threshold}), so the task has one segment to the goal"
             )
         if lost:
             parts.append(
