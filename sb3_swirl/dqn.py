@@ -10,7 +10,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from stable_baselines3 import DQN
+from stable_baselines3 import DQN, HerReplayBuffer
 from stable_baselines3.common.type_aliases import GymEnv, Schedule
 from stable_baselines3.dqn.policies import DQNPolicy
 from torch.nn import functional as F
@@ -27,6 +27,7 @@ from swirl_wrappers.wrappers import (
     SEGMENT_KEY,
     SEGMENT_REWARD_KEY,
     TASK_REWARD_KEY,
+    relabelling_refused,
     state_space,
 )
 
@@ -235,6 +236,7 @@ class SwirlDQN(DQN):
         if self.env is not None:
             self._take_task(task)
             self._check_demonstrations()
+            self._check_relabelling()
         elif _init_setup_model:
             raise ValueError(
                 "SwirlDQN needs an environment that carries the SWIRL task: e.g. "
@@ -278,6 +280,19 @@ class SwirlDQN(DQN):
                 "policy-invariant only when they are equal",
                 stacklevel=stacklevel,
             )
+
+    def _check_relabelling(self) -> None:
+        """Refuse ``HerReplayBuffer`` now, not at the first update, where the task reads the
+        goal (``SwirlWrapper.compute_reward`` would refuse every relabelled goal)."""
+        her = isinstance(self.replay_buffer_class, type) and issubclass(
+            self.replay_buffer_class, HerReplayBuffer
+        )
+        assert self.env is not None
+        # has_attr first: a get_attr that fails inside a SubprocVecEnv worker kills the worker
+        if her and self.env.has_attr("reads_goal"):
+            reads = self.env.get_attr("reads_goal", indices=[0])[0]
+            if reads:
+                raise ValueError(relabelling_refused(reads))
 
     def _check_demonstrations(self) -> None:
         """Refuse demos that do not fit the env's spaces now, not inside ``learn``."""

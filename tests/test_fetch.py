@@ -203,6 +203,22 @@ def test_her_works_with_a_goal_free_task_and_is_refused_when_the_task_reads_the_
         her(make(["observation", "goal_offset"], [10, 11, 12]), copy_info_dict=True)
     with pytest.raises(ValueError, match=r"refuses relabelled goals .* reads \['goal_offset'\]"):
         her(make(KEYS, [0, 16]), copy_info_dict=True)
+    # SwirlDQN refuses it when it is built, not at its first update
+    with pytest.raises(ValueError, match=r"refuses relabelled goals .* reads \['goal_offset'\]"):
+        SwirlDQN(
+            "MultiInputPolicy",
+            make(["observation", "goal_offset"], [10, 11, 12]),
+            replay_buffer_class=HerReplayBuffer,
+            replay_buffer_kwargs=dict(copy_info_dict=True),
+            learning_starts=10**6,
+        )
+    SwirlDQN(  # a task without the goal: fine
+        "MultiInputPolicy",
+        make("observation", [0, 1, 2]),
+        replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs=dict(copy_info_dict=True),
+        buffer_size=1000,
+    )
 
 
 def test_swirl_vec_env_refuses_to_relabel_goals():

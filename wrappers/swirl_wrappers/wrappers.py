@@ -323,6 +323,17 @@ def _refuse_monitor_below(env: Any) -> None:
         env = env.env
 
 
+def relabelling_refused(keys: list[str]) -> str:
+    """Why hindsight relabelling (``HerReplayBuffer``) cannot work when the task reads ``keys``."""
+    return (
+        f"SwirlWrapper refuses relabelled goals (HerReplayBuffer): its task reads {keys}, so "
+        "the segment reward follows the path under the episode's own goal and cannot be "
+        "recomputed for another one. Give the task a state without the goal (e.g. "
+        "state_key='observation') to use hindsight relabelling, or train without "
+        "HerReplayBuffer"
+    )
+
+
 class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Track the segment of a SWIRL proxy task and reward the agent with its local reward.
 
@@ -427,6 +438,12 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         return int(self.tracker.index)
 
     @property
+    def reads_goal(self) -> list[str]:
+        """The env's goal keys (``goal_keys``, default ``("desired_goal",)``) that the task
+        state reads: where any is, hindsight relabelling is refused."""
+        return list(self._reads_goal)
+
+    @property
     def potential(self) -> float:
         return float(self.tracker.potential)
 
@@ -482,13 +499,7 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
             any(goal is None for goal in recorded)
             or not np.array_equal(np.reshape(recorded, np.shape(desired_goal)), desired_goal)
         ):
-            raise ValueError(
-                f"SwirlWrapper refuses relabelled goals (HerReplayBuffer): its task reads "
-                f"{self._reads_goal}, so the segment reward follows the path under the "
-                "episode's own goal and cannot be recomputed for another one. Give the task a "
-                "state without the goal (e.g. state_key='observation') to use hindsight "
-                "relabelling, or train without HerReplayBuffer"
-            )
+            raise ValueError(relabelling_refused(self._reads_goal))
         if any(SEGMENT_REWARD_KEY not in i or TASK_REWARD_KEY not in i for i in infos):
             raise ValueError(
                 "SwirlWrapper.compute_reward needs each step's info (its 'segment_reward' and "
