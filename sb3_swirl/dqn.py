@@ -258,6 +258,13 @@ class SwirlDQN(DQN):
         if task is not None and _proxy_task(task) != _proxy_task(self.task):
             raise ValueError("task differs from the task carried by the environment")
 
+    def _trained_on_another(self, task: TaskModel) -> bool:
+        """Whether ``task`` has other regions or rewards than the one the model was trained
+        with (``task_json``; reward settings aside, which a model adopts)."""
+        return self.task_json is not None and _proxy_task(task) != _proxy_task(
+            TaskModel.from_json(self.task_json)
+        )
+
     def _check_settings(self, saved: RewardConfig, stacklevel: int) -> None:
         """Warn when the env's reward settings (now the model's) differ from ``saved``, the
         ones the model was trained with, and when its shaping discounts otherwise."""
@@ -348,15 +355,13 @@ class SwirlDQN(DQN):
         return out
 
     def _setup_model(self) -> None:
-        if self.task_json is not None:
-            saved = TaskModel.from_json(self.task_json)
-            if self.task is None:  # `load` without an env
-                self.task = saved
-            elif _proxy_task(self.task) != _proxy_task(saved):  # `load` with an env
-                raise ValueError(
-                    "the environment's proxy task differs from the one this model was trained "
-                    "with; load without env=, then wrap the env with model.task"
-                )
+        if self.task is None and self.task_json is not None:  # `load` without an env
+            self.task = TaskModel.from_json(self.task_json)
+        elif self.task is not None and self._trained_on_another(self.task):  # `load` with one
+            raise ValueError(
+                "the environment's proxy task differs from the one this model was trained "
+                "with; load without env=, then wrap the env with model.task"
+            )
         if self.env is not None:  # built, or loaded with an env: the env's settings count
             trained_with = self.reward_config
             self._take_task(None)
@@ -397,9 +402,7 @@ class SwirlDQN(DQN):
         problem.
         """
         env = self._wrap_env(env, self.verbose)  # a VecEnv, as SB3's set_env makes it
-        if self.task_json is not None and _proxy_task(get_swirl_attr(env, "task")) != _proxy_task(
-            TaskModel.from_json(self.task_json)
-        ):  # refused before the model takes the env
+        if self._trained_on_another(get_swirl_attr(env, "task")):  # before taking the env
             raise ValueError(
                 "the new environment's proxy task differs from the one this model was built "
                 "with (model.task); wrap the env with model.task, or start a new model"
