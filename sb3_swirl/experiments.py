@@ -38,6 +38,10 @@ def _table_console() -> Console:
     return Console(width=None if sys.stdout.isatty() else 160)
 
 
+#: what the tables print after a ``--quick`` run
+_QUICK_TABLE = ". A --quick run (few episodes) checks the pipeline; it is not the result"
+
+
 def _output_name(stem: str, suffix: str, quick: bool) -> str:
     """``results.json`` for a full run, ``results_quick.json`` for ``--quick``: a quick run
     never overwrites the full run's outputs."""
@@ -856,11 +860,7 @@ def reproduce_table1(
         f"(paper: {results['paper_swirl_gain_over_segmented_bc']:.1%}); "
         f"SWIRL found {', '.join(map(str, segments))} segments"
         + (" (per seed)" if spread else "")
-        + (
-            ". A --quick run (few episodes) checks the pipeline; it is not the result"
-            if quick
-            else ""
-        )
+        + (_QUICK_TABLE if quick else "")
         + f". Wrote {path}"
     )
     return results
@@ -1039,13 +1039,7 @@ def reproduce_table2(
     console.print(
         f"SWIRL cut the line in {combined} of {n_eval * len(runs)} episodes ({len(runs)} lines × "
         f"{n_eval}, one line at a time; the paper's 11 of 15 were trials on sequences of lines "
-        "and curves, on gauze)"
-        + (
-            ". A --quick run (few episodes) checks the pipeline; it is not the result"
-            if quick
-            else ""
-        )
-        + f". Wrote {path}"
+        "and curves, on gauze)" + (_QUICK_TABLE if quick else "") + f". Wrote {path}"
     )
     return results
 
