@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -445,9 +447,35 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _show_warning(message: Warning | str, *args: Any, **kwargs: Any) -> None:
-    """Warnings (a demo that differs from the others, dropped regions) as one line each."""
-    console.print(f"[yellow]warning:[/] {escape(str(message))}", soft_wrap=True)
+# The fit's messages advise in TransitionStateClustering's arguments; `sb3-swirl fit` says
+# them as its flags (the ones it has).
+_AS_FLAGS = [
+    (re.compile(r"indicator='(\w+)'"), r"--indicator \1"),
+    (re.compile(r"min_demo_fraction=(\S+?)(?=[ ,;)]|$)"), r"--min-demo-fraction \1"),
+    (re.compile(r"lower min_demo_fraction"), "lower --min-demo-fraction"),
+    (re.compile(r"the indicator or window"), "--indicator or --window"),
+    (re.compile(r"a longer window"), "a longer --window"),
+    (re.compile(r"merge_fragments=True"), "without --no-merge-fragments"),
+    (re.compile(r"merge_same_dynamics=False"), "without --merge-same-dynamics"),
+    (re.compile(r"merge_same_dynamics=True"), "--merge-same-dynamics"),
+    (re.compile(r"reg_covar=(\S+?)(?=[ ,;)]|$)"), r"--reg-covar \1"),
+]
+
+
+def _as_flags(text: str) -> str:
+    """``text`` with the fit's arguments named as ``sb3-swirl fit``'s flags."""
+    for pattern, flag in _AS_FLAGS:
+        text = pattern.sub(flag, text)
+    return text
+
+
+def _warning_printer(say: Callable[[str], str]) -> Callable[..., None]:
+    """``warnings.showwarning`` printing each warning on one line, worded by ``say``."""
+
+    def show(message: Warning | str, *args: Any, **kwargs: Any) -> None:
+        console.print(f"[yellow]warning:[/] {escape(say(str(message)))}", soft_wrap=True)
+
+    return show
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -458,14 +486,15 @@ def main(argv: list[str] | None = None) -> int:
 
         return zoo_main(argv[1:])
     args = build_parser().parse_args(argv)
+    say = _as_flags if args.func is _cmd_fit else str
     try:
         with warnings.catch_warnings():
-            warnings.showwarning = _show_warning
+            warnings.showwarning = _warning_printer(say)
             return args.func(args)
     # OSError: a path that is a folder, unwritable...; ImportError: an optional extra missing
     except (ValueError, OSError, ImportError) as exc:
         # soft_wrap: never break a path a user may copy; escape: paths may contain [brackets]
-        console.print(f"[bold red]error:[/] {escape(str(exc))}", soft_wrap=True)
+        console.print(f"[bold red]error:[/] {escape(say(str(exc)))}", soft_wrap=True)
         return 2
     except KeyboardInterrupt:  # Ctrl-C: files are written atomically, none is left half-done
         console.print("interrupted", soft_wrap=True)

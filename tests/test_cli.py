@@ -81,7 +81,8 @@ def test_fit_flags_turn_off_nuisance_dims_and_merging(tmp_path, capsys):
         said = capsys.readouterr().err
         assert ("without task-space dims [3, 4, 5]" in said) is not bool(flags)
         assert ("No transition region" in said) is (len(flags) == 2)
-        assert ("merge_fragments=True" in said) is (len(flags) == 2)  # the advice names it
+        # the advice names the flag to leave out
+        assert ("without --no-merge-fragments" in said) is (len(flags) == 2)
     # the three phases; merging alone finds the first switch; as the paper, none
     assert list(segments.values()) == [3, 2, 1]
     assert main(["show", str(tmp_path / "task0.json")]) == 0  # the saved task says it too
@@ -346,7 +347,9 @@ def test_fit_prints_why_it_dropped_a_region(tmp_path, capsys):
     assert main(["fit", str(path), "-o", str(tmp_path / "task.json")]) == 0
     warned = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning:")]
     assert len(warned) == 1 and "none from demos [5]" in warned[0]
-    assert "min_demo_fraction=1.0 needs 6 of 6 demos" in warned[0]
+    # worded in the command's flags, not in the Python arguments
+    assert "--min-demo-fraction 1.0 needs 6 of 6 demos" in warned[0]
+    assert "--indicator auto tries" in warned[0] and "min_demo_fraction" not in warned[0]
 
 
 def test_reproduce_refuses_unknown_names_and_bad_seeds(capsys):
