@@ -12,6 +12,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3 import DQN, HerReplayBuffer
 from stable_baselines3.common.type_aliases import GymEnv, Schedule
+from stable_baselines3.common.vec_env import VecFrameStack, unwrap_vec_wrapper
 from stable_baselines3.dqn.policies import DQNPolicy
 from torch.nn import functional as F
 
@@ -305,14 +306,19 @@ class SwirlDQN(DQN):
         """Refuse demos that do not fit the env's spaces now, not inside ``learn``."""
         if not self.demonstrations:
             return
+        if unwrap_vec_wrapper(self.env, VecFrameStack) is not None:
+            raise ValueError(
+                "SwirlDQN cannot clone demonstrations into a frame-stacked env (VecFrameStack): "
+                "a demo holds one state a step. Train without VecFrameStack, or without "
+                "demonstrations"
+            )
         check_demos_fit_spaces(
             self.demonstrations,
             self._demo_space().shape[0],
             int(self.action_space.n),  # type: ignore[attr-defined]
             "demonstration",
             "the environment's (unlifted) observations",
-            " (demos must be states of the env under the SWIRL wrapper; frame stacking is not "
-            "supported)",
+            " (demos must be states of the env under the SWIRL wrapper)",
         )
 
     def _demo_space(self) -> spaces.Box:

@@ -54,7 +54,8 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
     ``VecEnvWrapper`` cannot end one sub-env's episode: for ``terminate_on_completion``, wrap
     each env with ``SwirlWrapper`` instead (:func:`make_swirl_env`).
 
-    ``get_attr("task")`` and ``get_attr("reward_config")`` answer for every sub-env, as for
+    ``get_attr`` of ``"task"``, ``"reward_config"``, ``"terminate_on_completion"``,
+    ``"state_key"`` and ``"segment"`` (each sub-env's index) answers for every sub-env, as for
     sub-envs wrapped with ``SwirlWrapper``.
 
     Parameters
@@ -118,12 +119,17 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
         super().__init__(venv, observation_space=self.lifter.observation_space)
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        if attr_name in SWIRL_ATTRIBUTES:
-            return [getattr(self, attr_name)] * len(self._get_indices(indices))
+        chosen = self._get_indices(indices)
+        if attr_name == "segment":  # each sub-env's own, as a SwirlWrapper's
+            return [int(self.tracker.index[i]) for i in chosen]
+        if attr_name in (*SWIRL_ATTRIBUTES, "state_key"):
+            return [getattr(self, attr_name)] * len(chosen)
         return self.venv.get_attr(attr_name, indices)
 
     def has_attr(self, attr_name: str) -> bool:
-        return attr_name in SWIRL_ATTRIBUTES or self.venv.has_attr(attr_name)
+        return attr_name in (*SWIRL_ATTRIBUTES, "segment", "state_key") or self.venv.has_attr(
+            attr_name
+        )
 
     def env_method(
         self,

@@ -11,6 +11,7 @@ import pytest
 import torch as th
 from gymnasium import spaces
 from stable_baselines3 import DQN
+from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNormalize
 
 import sb3_swirl.envs  # noqa: F401  (registers the envs)
 from sb3_swirl.demos import Demonstration
@@ -230,7 +231,6 @@ def test_a_model_saved_before_learning_keeps_its_demonstrations(tmp_path):
 
 
 def test_bc_under_vec_normalize_updates_the_statistics_with_the_demo_states():
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     venv = VecNormalize(DummyVecEnv([point_env]), norm_reward=False)
     model = SwirlDQN("MlpPolicy", venv, demonstrations=point_demos(3), bc_epochs=30, seed=0)
@@ -268,6 +268,13 @@ def test_demos_that_do_not_fit_the_env_are_refused_when_the_model_is_built(demo,
         same = demo.observations.shape[1] == 3 or np.ndim(demo.actions) == 2
         first = demo if same else point_demos(1)[0]
         SwirlDQN("MlpPolicy", point_env(), demonstrations=[first, demo], seed=0)
+
+
+def test_demos_are_refused_on_a_frame_stacked_env_with_the_reason():
+    stacked = VecFrameStack(DummyVecEnv([point_env]), 2)
+    with pytest.raises(ValueError, match=r"frame-stacked env \(VecFrameStack\): a demo holds"):
+        SwirlDQN("MlpPolicy", stacked, demonstrations=point_demos(2), seed=0)
+    SwirlDQN("MlpPolicy", stacked, seed=0)  # without demos it is DQN on the proxy task
 
 
 @pytest.mark.parametrize(
@@ -319,7 +326,6 @@ def test_prefill_lays_demos_out_in_order_for_n_step_returns(handle_timeout_termi
     column's last row is a demo's end or ends an episode as a truncation: the n-step return of
     every demo transition equals its return computed from the demo alone (also where SB3
     stores no truncations)."""
-    from stable_baselines3.common.vec_env import DummyVecEnv
 
     demos = point_demos(4)
     model = SwirlDQN(
@@ -527,7 +533,6 @@ def test_save_load_round_trip_keeps_the_demo_loss_and_no_second_bc(tmp_path, mon
 
 
 def test_demo_loss_normalises_demo_obs_with_the_current_vec_normalize_stats(monkeypatch):
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     venv = VecNormalize(DummyVecEnv([point_env]), norm_reward=False)
     model = SwirlDQN(

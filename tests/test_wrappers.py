@@ -592,6 +592,10 @@ def test_all_wrappers_expose_the_task():
         assert venv.get_attr("task") == [task, task]
         assert venv.get_attr("reward_config") == [config, config]
         assert venv.has_attr("task") and venv.get_attr("terminate_on_completion") == [False] * 2
+        assert venv.get_attr("state_key") == [None, None]
+        obs = venv.reset()
+        assert venv.get_attr("segment") == [int(np.argmax(o[-task.n_indices :])) for o in obs]
+        assert venv.get_attr("segment", indices=[1]) == venv.get_attr("segment")[1:]
 
 
 # ----------------------------------------------------------------------- fuzzing
