@@ -54,9 +54,10 @@ _DEFAULT_WINDOW = 3  # of the GMM and velocity indicators
 
 # ---------------------------------------------------------------------------- helpers
 def _scale(x: np.ndarray) -> np.ndarray:
-    """Per-column standard deviation, with constant columns given scale 1."""
+    """Per-column standard deviation, with constant columns (no spread beyond rounding of
+    their own values) given scale 1."""
     std = x.std(axis=0)
-    return np.where(std > 1e-12 * max(1.0, float(np.abs(x).max(initial=0.0))), std, 1.0)
+    return np.where(std > 1e-12 * np.maximum(1.0, np.abs(x).max(axis=0, initial=0.0)), std, 1.0)
 
 
 def _local_maxima(score: np.ndarray, threshold: float, radius: int) -> np.ndarray:
@@ -626,7 +627,8 @@ def dynamics_cv_error(
     locally linear dynamics the paper's §5 assumes), fitted by ridge regression on the steps of
     that segment in every *other* demonstration; the error is the mean squared prediction error
     of each demonstration's steps (leave one demonstration out). States are divided by their
-    spread over all demonstrations, and each demonstration's steps by its ``time_scale``.
+    spread over all demonstrations (a dimension whose mean lies over 1000 spreads from 0 is
+    centred first), and each demonstration's steps by its ``time_scale``.
     A segmentation that misses a change of dynamics, or cuts in the wrong place, predicts
     worse; one that cuts too often has less data per segment to predict from.
     ``TransitionStateClustering(indicator="auto")`` chooses its indicator by it.
@@ -650,12 +652,17 @@ def dynamics_cv_error(
     """
     if time_scale is None:
         time_scale = np.ones(len(states))
-    scale = _scale(np.concatenate(states))
+    pooled = np.concatenate(states)
+    scale = _scale(pooled)
+    # a dimension far from its origin (a timestamp, a UTM coordinate) is centred, or its sums
+    # of squares would cancel in the leave-one-out Gram matrices
+    mean = pooled.mean(axis=0)
+    offset = np.where(np.abs(mean) > 1e3 * scale, mean, 0.0)
     blocks = []  # per demo: features, targets, segment labels
     gram: dict[int, np.ndarray] = {}
     cross: dict[int, np.ndarray] = {}
     for x, sw, r in zip(states, switches, time_scale, strict=True):
-        z = np.asarray(x, dtype=np.float64) / scale
+        z = (np.asarray(x, dtype=np.float64) - offset) / scale
         targets = np.diff(z, axis=0) / r
         feats = np.column_stack([z[:-1], np.ones(len(targets))])
         labels = np.searchsorted(np.sort(sw), np.arange(len(targets)), side="right")

@@ -561,3 +561,18 @@ def test_demonstrations_that_end_apart_are_told_so():
     with pytest.raises(ValueError) as still_error:
         TransitionStateClustering(random_state=0).fit(still)
     assert "different places" not in str(still_error.value)
+
+
+def test_far_from_the_origin_and_scale_apart_dims_segment_as_the_plain_demos():
+    """States far from their origin (a timestamp, a UTM coordinate) and dimensions on scales a
+    trillion apart: the same switches as the demos as they are."""
+    demos, _ = make_piecewise_linear_demos(n_demos=6, random_state=0)
+    states = [d.observations for d in demos]
+    plain = TransitionStateClustering(random_state=0).fit(states).switches_
+    for changed in (
+        [x + 1e9 for x in states],
+        [x * [1e6, 1e-6] for x in states],
+        [x * [1e-6, 1e6] for x in states],
+    ):
+        found = TransitionStateClustering(random_state=0).fit(changed).switches_
+        assert all(np.array_equal(a, b) for a, b in zip(found, plain, strict=True))
