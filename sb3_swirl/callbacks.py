@@ -10,6 +10,7 @@ original, unnormalised reward. An episode end without ``"is_success"`` counts as
 from __future__ import annotations
 
 import os
+import warnings
 from collections import deque
 from collections.abc import Iterable
 from typing import Any
@@ -25,7 +26,7 @@ from stable_baselines3.common.vec_env import (
     unwrap_vec_normalize,
 )
 
-from sb3_swirl.vec_env import get_swirl_attr
+from sb3_swirl.vec_env import carries_task, get_swirl_attr, same_task
 from swirl_wrappers._io import atomic_write
 from swirl_wrappers._validation import check_int
 
@@ -41,6 +42,19 @@ def _success_rate(episodes: Iterable[dict]) -> float:
     if all(flag is None for flag in flags):
         return np.nan
     return float(np.mean([bool(flag) for flag in flags]))
+
+
+def _check_discount(model: Any, env: VecEnv) -> None:
+    """Warn when a SWIRL env's potential shaping discounts otherwise than ``model`` (SwirlDQN
+    checks it itself, when it takes the env)."""
+    from sb3_swirl.dqn import SwirlDQN
+
+    gamma = getattr(model, "gamma", None)
+    if gamma is None or isinstance(model, SwirlDQN) or not carries_task(env):
+        return
+    mismatch = get_swirl_attr(env, "reward_config").discount_mismatch(gamma, type(model).__name__)
+    if mismatch:
+        warnings.warn(mismatch, stacklevel=2)
 
 
 class _EpisodeTracker:
@@ -95,18 +109,17 @@ class SegmentProgressCallback(BaseCallback):
     def __init__(self, window_size: int = 100, n_segments: int | None = None, verbose: int = 0):
         super().__init__(verbose=verbose)
         self.window_size = check_int("window_size", window_size, low=1)
-        self.n_segments = n_segments
+        self.n_segments = None if n_segments is None else check_int("n_segments", n_segments, low=1)
         self.n_episodes = 0
         self._episodes: deque[dict] = deque(maxlen=window_size)
         self._tracker: _EpisodeTracker | None = None
         self._final_obs: Any = None  # the model's last observation when training last ended
 
     def _init_callback(self) -> None:
+        _check_discount(self.model, self.training_env)
         if self.n_segments is None:
-            try:
-                self.n_segments = get_swirl_attr(self.training_env, "task").n_segments
-            except ValueError:
-                self.n_segments = 0  # not a SWIRL env: success and return only
+            swirl = carries_task(self.training_env)  # else success and return only
+            self.n_segments = get_swirl_attr(self.training_env, "task").n_segments if swirl else 0
         # learn() resets the env (a new _last_obs) unless it goes on with reset_num_timesteps=False:
         # then the running episodes go on too
         n_envs = self.training_env.num_envs
@@ -158,8 +171,11 @@ class TaskEvalCallback(EvalCallback):
     ``eval/mean_ep_length``. ``eval/mean_reward`` is the return ``evaluate_policy`` reads: the
     proxy return with ``Monitor`` outside the SWIRL wrapper (``make_swirl_env``), the env's
     own with a ``Monitor`` inside it (the zoo). The best model (highest success rate, ties broken by
-    true return) goes to ``best_model_save_path/best_model.zip``. Episodes are counted as
-    ``evaluate_policy`` counts them (by ``Monitor`` when the env has one).
+    true return) goes to ``best_model_save_path/best_model.zip``, and ``best_mean_reward`` is its
+    true return: SB3's ``StopTrainingOnRewardThreshold`` compares the threshold with it, and
+    ``StopTrainingOnNoModelImprovement`` counts an evaluation as an improvement when it rises
+    (not when only the success rate does). Episodes are counted as ``evaluate_policy`` counts
+    them (by ``Monitor`` when the env has one).
 
     History, one entry per evaluation: ``evaluations_timesteps``, ``evaluations_episodes``
     (training episodes finished so far: the paper's "rollouts"), ``success_rates``,
@@ -174,7 +190,7 @@ class TaskEvalCallback(EvalCallback):
     Parameters
     ----------
     eval_env : gymnasium.Env or VecEnv
-        Wrapped like the training env.
+        Wrapped like the training env, with the same SWIRL task (checked when training starts).
     n_eval_episodes, eval_freq, log_path, best_model_save_path, deterministic, render, verbose,
     warn, callback_on_new_best, callback_after_eval :
         As in :class:`stable_baselines3.common.callbacks.EvalCallback`.
@@ -239,6 +255,22 @@ class TaskEvalCallback(EvalCallback):
         summary = self._sums.step(i, float(rewards[i]), counted, info)
         if summary is not None:
             self._episodes.append(summary)
+
+    def _init_callback(self) -> None:
+        super()._init_callback()
+        _check_discount(self.model, self.training_env)
+        trained = carries_task(self.training_env)
+        if trained != carries_task(self.eval_env) or (
+            trained
+            and not same_task(
+                get_swirl_attr(self.training_env, "task"), get_swirl_attr(self.eval_env, "task")
+            )
+        ):
+            raise ValueError(
+                "TaskEvalCallback's eval_env must carry the training env's SWIRL task (the "
+                "policy reads the segment index of its regions): wrap it as the training env, "
+                "with the same task"
+            )
 
     def _on_training_start(self) -> None:
         if self.eval_at_start and not self.evaluations_timesteps:
@@ -330,7 +362,7 @@ class TaskEvalCallback(EvalCallback):
             if self.best_model_save_path is not None:
                 self.model.save(os.path.join(self.best_model_save_path, "best_model"))
             self.best_score = score
-            self.best_mean_reward = self.last_mean_reward
+            self.best_mean_reward = task_return
             if self.callback_on_new_best is not None:
                 continue_training = self.callback_on_new_best.on_step()
         if self.callback is not None:

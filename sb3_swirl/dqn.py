@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import warnings
 from collections.abc import Sequence
 from typing import Any, ClassVar, Literal
@@ -20,7 +19,7 @@ from sb3_swirl.buffers import DictNStepReplayBuffer
 from sb3_swirl.demos import Demonstration, as_demonstrations, check_demos_fit_spaces
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.inverse_dynamics import InverseDynamics
-from sb3_swirl.vec_env import get_swirl_attr
+from sb3_swirl.vec_env import get_swirl_attr, same_task
 from swirl_wrappers import Lifter, RewardConfig, SegmentTracker, TaskModel
 from swirl_wrappers._validation import check_bool, check_int, check_option, check_real
 from swirl_wrappers.wrappers import (
@@ -33,12 +32,6 @@ from swirl_wrappers.wrappers import (
 )
 
 __all__ = ["SwirlDQN"]
-
-
-def _proxy_task(task: TaskModel) -> str:
-    """The task's regions and rewards as JSON, without its reward settings: those the env's
-    wrapper pays by may differ (a model adopts them, with a warning)."""
-    return dataclasses.replace(task, reward_config=RewardConfig()).to_json()
 
 
 class SwirlDQN(DQN):
@@ -256,14 +249,14 @@ class SwirlDQN(DQN):
         self.reward_config = get_swirl_attr(self.env, "reward_config")
         self.terminate_on_completion = get_swirl_attr(self.env, "terminate_on_completion")
         self.task_json = self.task.to_json()
-        if task is not None and _proxy_task(task) != _proxy_task(self.task):
+        if task is not None and not same_task(task, self.task):
             raise ValueError("task differs from the task carried by the environment")
 
     def _trained_on_another(self, task: TaskModel) -> bool:
         """Whether ``task`` has other regions or rewards than the one the model was trained
         with (``task_json``; reward settings aside, which a model adopts)."""
-        return self.task_json is not None and _proxy_task(task) != _proxy_task(
-            TaskModel.from_json(self.task_json)
+        return self.task_json is not None and not same_task(
+            task, TaskModel.from_json(self.task_json)
         )
 
     def _check_settings(self, saved: RewardConfig, stacklevel: int) -> None:
@@ -281,13 +274,9 @@ class SwirlDQN(DQN):
                 f"model was trained with {saved}; it goes on with the environment's ({already})",
                 stacklevel=stacklevel,
             )
-        if self.reward_config.potential and self.reward_config.gamma != self.gamma:
-            warnings.warn(
-                f"the SWIRL wrapper shapes with gamma={self.reward_config.gamma} but SwirlDQN "
-                f"discounts with gamma={self.gamma}: the potential shaping is "
-                "policy-invariant only when they are equal",
-                stacklevel=stacklevel,
-            )
+        mismatch = self.reward_config.discount_mismatch(self.gamma, "SwirlDQN")
+        if mismatch:
+            warnings.warn(mismatch, stacklevel=stacklevel)
 
     def _check_relabelling(self) -> None:
         """Refuse ``HerReplayBuffer`` now, not at the first update, where the task reads the

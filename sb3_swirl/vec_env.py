@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -181,6 +182,27 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
         return lifted, rewards.astype(np.float32), dones, infos
 
 
+def same_task(a: TaskModel, b: TaskModel) -> bool:
+    """Whether two tasks have the same regions and rewards, their reward settings aside: those
+    the env's wrapper pays by may differ (a model adopts them, with a warning)."""
+    plain = RewardConfig()
+    return (
+        dataclasses.replace(a, reward_config=plain).to_json()
+        == dataclasses.replace(b, reward_config=plain).to_json()
+    )
+
+
+def carries_task(env: Any) -> bool:
+    """Whether ``env`` is a SWIRL env: a ``VecEnv`` whose ``get_attr("task")`` is a TaskModel
+    (a Fetch env's own ``task`` attribute is a name)."""
+    # has_attr first: a get_attr that fails inside a SubprocVecEnv worker kills the worker
+    return (
+        isinstance(env, VecEnv)
+        and env.has_attr("task")
+        and isinstance(env.get_attr("task", indices=[0])[0], TaskModel)
+    )
+
+
 def get_swirl_attr(env: VecEnv, name: str) -> Any:
     """``env.get_attr(name)`` of a SWIRL env's first sub-env: ``"task"``, ``"reward_config"`` or
     ``"terminate_on_completion"``.
@@ -193,8 +215,7 @@ def get_swirl_attr(env: VecEnv, name: str) -> Any:
     ValueError
         If the env carries no SWIRL task, with a hint on how to wrap it.
     """
-    # has_attr first: a get_attr that fails inside a SubprocVecEnv worker kills the worker
-    if not (isinstance(env, VecEnv) and env.has_attr("task")):
+    if not carries_task(env):
         raise ValueError(
             "the environment carries no SWIRL proxy task: wrap it first, e.g. "
             "`SwirlWrapper(env, task)` in every sub-env, `make_swirl_env(env_id, task, "

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -17,7 +19,7 @@ from test_dqn import PointEnv, point_demos, point_env, point_task
 from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
 from sb3_swirl.dqn import SwirlDQN
 from sb3_swirl.vec_env import make_swirl_env
-from swirl_wrappers import SwirlWrapper
+from swirl_wrappers import Region, SwirlWrapper
 
 
 def logged(path) -> dict[str, list[str]]:
@@ -266,3 +268,58 @@ def test_task_eval_without_is_success_ranks_by_the_true_return(capsys, tmp_path)
     assert "New best true return!" in out and "New best success rate" not in out
     log = logged(tmp_path)
     assert len(log["eval/task_return"]) == 2 and "eval/success_rate" not in log  # not NaN
+
+
+def test_sb3_stop_on_threshold_reads_the_true_return_of_the_best_model():
+    """The proxy return of the BC start is negative; its true return is 1 (it parks)."""
+    from stable_baselines3.common.callbacks import StopTrainingOnRewardThreshold
+
+    model = SwirlDQN(
+        "MlpPolicy", point_env(), demonstrations=point_demos(3), bc_epochs=100, seed=0,
+        exploration_initial_eps=0.05, learning_starts=1000,
+    )  # fmt: skip
+    callback = TaskEvalCallback(
+        point_env(),
+        n_eval_episodes=3,
+        eval_freq=100,
+        verbose=0,
+        callback_on_new_best=StopTrainingOnRewardThreshold(reward_threshold=0.5),
+    )
+    model.learn(300, callback=callback)
+    assert callback.evaluations_timesteps == [100]  # stopped at once
+    assert callback.best_mean_reward == callback.task_returns[0] == 1.0
+    assert callback.last_mean_reward < 0  # the proxy return, which it does not compare
+
+
+def test_task_eval_refuses_an_eval_env_with_another_task():
+    model = PPO("MlpPolicy", point_env(), n_steps=64, batch_size=32, n_epochs=1, seed=0)
+    task = point_task()
+    moved = Region(mean=[0.5, 0.0], covariance=np.eye(2) * 0.01, threshold=1.0)
+    other = dataclasses.replace(task, regions=[moved, *task.regions[1:]])
+    for eval_env in (SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 60), other), PointEnv()):
+        with pytest.raises(ValueError, match="eval_env must carry the training env's SWIRL task"):
+            model.learn(64, callback=TaskEvalCallback(eval_env, eval_freq=64, verbose=0))
+    # the reward settings may differ: only the proxy return evaluated changes
+    model.learn(64, callback=TaskEvalCallback(point_env(reward_config={"scale": 2.0})))
+
+
+def test_callbacks_warn_when_the_shaping_discounts_otherwise_than_the_agent():
+    shaped = {"mode": "potential", "gamma": 0.99}
+    model = PPO(
+        "MlpPolicy", point_env(reward_config=shaped), gamma=0.9, n_steps=32, batch_size=32, seed=0
+    )
+    for callback in (SegmentProgressCallback(), TaskEvalCallback(point_env(), eval_freq=10**6)):
+        with pytest.warns(UserWarning, match=r"shapes with gamma=0\.99 but PPO discounts with"):
+            model.learn(32, callback=callback)
+    model = PPO(
+        "MlpPolicy", point_env(reward_config=shaped), gamma=0.99, n_steps=32, batch_size=32, seed=0
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model.learn(32, callback=SegmentProgressCallback())
+
+
+@pytest.mark.parametrize("n_segments", ["2", 2.5, 0, -1])
+def test_segment_progress_refuses_a_bad_segment_count(n_segments):
+    with pytest.raises(ValueError, match="n_segments"):
+        SegmentProgressCallback(n_segments=n_segments)

@@ -172,9 +172,11 @@ def test_swirl_on_gymnasium_robotics_fetch_reach_passes_sb3_check_env():
     check_env(env)
     env.reset(seed=0)
     obs, reward, *_, info = env.step(env.action_space.sample())
-    assert env.compute_reward(obs["achieved_goal"], obs["desired_goal"], info) == reward
-    # another goal: the segment part is kept, the env's part recomputed (-1 -> 0, weight 2)
-    relabelled = env.compute_reward(obs["achieved_goal"], obs["achieved_goal"], info)
+    with warnings.catch_warnings():  # the env's reward has a weight: relabelling counts
+        warnings.simplefilter("error")
+        assert env.compute_reward(obs["achieved_goal"], obs["desired_goal"], info) == reward
+        # another goal: the segment part is kept, the env's part recomputed (-1 -> 0, weight 2)
+        relabelled = env.compute_reward(obs["achieved_goal"], obs["achieved_goal"], info)
     assert info["task_reward"] == -1.0 and relabelled == pytest.approx(reward + 2.0)
 
 
@@ -194,7 +196,9 @@ def test_her_works_with_a_goal_free_task_and_is_refused_when_the_task_reads_the_
         )
         model.learn(120)
 
-    her(make("observation", [0, 1, 2]), copy_info_dict=True)
+    # the default reward settings weigh the env's own reward 0: HER changes nothing, and says so
+    with pytest.warns(UserWarning, match="relabelled goals change no reward here"):
+        her(make("observation", [0, 1, 2]), copy_info_dict=True)
     # what counts is the entries the task reads, not the keys the state joins
     her(make(KEYS, [0, 1, 2]), copy_info_dict=True)
     with pytest.raises(ValueError, match="pass replay_buffer_kwargs=dict\\(copy_info_dict=True\\)"):

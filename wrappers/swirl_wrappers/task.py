@@ -234,6 +234,17 @@ class RewardConfig:
         """Whether the reward is potential-based shaping (``mode="potential"``)."""
         return self.mode == "potential"
 
+    def discount_mismatch(self, gamma: float, agent: str) -> str | None:
+        """Why the shaping is not policy-invariant for an agent that discounts with ``gamma``
+        (``None`` when it is, or when the reward is not potential-based shaping)."""
+        if not self.potential or gamma == self.gamma:
+            return None
+        return (
+            f"the SWIRL wrapper shapes with gamma={self.gamma} but {agent} discounts with "
+            f"gamma={gamma}: the potential shaping is policy-invariant only when they are equal "
+            f"(reward_config={{'gamma': {gamma}}} on the wrapper makes them so)"
+        )
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "mode": self.mode,

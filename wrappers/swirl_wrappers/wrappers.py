@@ -13,6 +13,7 @@ reset ``info`` gets ``"segment"``. The environment's own info keys pass through.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Any, SupportsFloat
 
@@ -495,10 +496,10 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
             )
         infos = [info] if isinstance(info, dict) else list(info)
         recorded = [i.get(GOAL_KEY) for i in infos]
-        if self._reads_goal and (
-            any(goal is None for goal in recorded)
-            or not np.array_equal(np.reshape(recorded, np.shape(desired_goal)), desired_goal)
-        ):
+        relabelled = any(goal is None for goal in recorded) or not np.array_equal(
+            np.reshape(recorded, np.shape(desired_goal)), desired_goal
+        )
+        if self._reads_goal and relabelled:
             raise ValueError(relabelling_refused(self._reads_goal))
         if any(SEGMENT_REWARD_KEY not in i or TASK_REWARD_KEY not in i for i in infos):
             raise ValueError(
@@ -513,6 +514,14 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
             dtype=np.float64,
         ).reshape(task_rewards.shape)
         weight = self.reward_config.task_reward_weight
+        if weight == 0.0 and relabelled:
+            warnings.warn(
+                "relabelled goals change no reward here: the agent's reward does not "
+                "depend on the goal, as the task's reward settings weigh the env's own reward "
+                "by task_reward_weight=0. Give it a weight (e.g. reward_config={'mode': "
+                "'potential'}) for the relabelled goals to count",
+                stacklevel=2,
+            )
         rewards = segment_rewards + weight * (env_rewards - task_rewards)
         return float(rewards[0]) if isinstance(info, dict) else rewards
 
