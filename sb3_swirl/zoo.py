@@ -48,6 +48,7 @@ import numpy as np
 import yaml
 
 from sb3_swirl.demos import Demonstration, check_demos_fit_spaces, load_demos
+from sb3_swirl.vec_env import carries_task, get_swirl_attr
 from swirl_wrappers import RewardConfig, SwirlWrapper, TaskModel
 from swirl_wrappers.wrappers import StateKey, state_space
 
@@ -256,6 +257,12 @@ class SwirlTaskWrapper(SwirlWrapper):
                 "In Python, make_swirl_env(env_id, task, wrapper_kwargs={'terminate_on_completion'"
                 ": True}) puts Monitor outside"
             )
+        for name, value in (("fit", fit), ("reward_config", reward_config)):
+            if value is not None and not isinstance(value, Mapping):
+                raise ValueError(
+                    f"SwirlTaskWrapper {name}: expected a mapping of settings "
+                    f"({{reg_covar: 0.1}}), got {value!r}"
+                )
         saved = os.environ.get(TASK_FILE_ENV)
         reward = {**(reward_config or {}), **getattr(_TRIAL, "reward_config", {})}
         if saved:  # enjoy: the task the model was trained with
@@ -427,15 +434,21 @@ def check_config(
         for w in (wrappers if isinstance(wrappers, list) else [wrappers])
         if isinstance(w, Mapping) and str(next(iter(w))).endswith(".SwirlTaskWrapper")
     ]
-    for spec in specs:
-        allowed = set(inspect.signature(SwirlTaskWrapper).parameters) - {"env"}
-        _check_keys(f"{where}, SwirlTaskWrapper", spec, allowed)
-        env = gym.make(env_id, **(entry.get("env_kwargs") or {}))
-        try:
+    env = gym.make(env_id, **(entry.get("env_kwargs") or {}))
+    try:
+        if algo == "swirl_dqn" and not isinstance(env.action_space, gym.spaces.Discrete):
+            raise ValueError(
+                f"{where}: swirl_dqn needs discrete actions (SwirlDQN is a DQN), and {env_id} "
+                f"has {env.action_space}: train another algorithm (sac, td3, ppo) with the "
+                "SwirlTaskWrapper"
+            )
+        for spec in specs:
+            allowed = set(inspect.signature(SwirlTaskWrapper).parameters) - {"env"}
+            _check_keys(f"{where}, SwirlTaskWrapper", spec, allowed)
             with _reraise_in(where):
                 SwirlTaskWrapper(env, **spec)
-        finally:
-            env.close()
+    finally:
+        env.close()
     if algo == "swirl_dqn" and not specs:
         raise ValueError(
             f"{where}: swirl_dqn needs the SWIRL task: add an env_wrapper entry "
@@ -514,20 +527,20 @@ def _train(argv: list[str]) -> int:
         if entry.get("env_kwargs") and _option(argv, "--env-kwargs") is None:
             argv = [*argv, "--env-kwargs", *(f"{k}:{v!r}" for k, v in entry["env_kwargs"].items())]
     try:
-        _run(train, "train", argv)
-    except ValueError as exc:  # a setting the algorithm refuses: before training, one line
+        with _task_saved_with_each_run():
+            _run(train, "train", argv)
+    # a setting the algorithm refuses (SB3 asserts some), before training: one line
+    except (ValueError, AssertionError) as exc:
         if _raised_in_learn(exc):
             raise
         hint = ""
-        if "proxy task differs" in str(exc):
+        if _option(argv, "-i", "--trained-agent") is not None:
             hint = (
                 " (with -i, the entry's demos and fit must give the task the model was "
                 "trained with)"
             )
         print(f"error: {exc}{hint}", file=sys.stderr)
         return 2
-    if algo == "swirl_dqn":
-        _write_task(argv, str(env_id))
     return 0
 
 
@@ -563,18 +576,29 @@ def _model_path(argv: list[str], env_id: str) -> tuple[str, str]:
     return model_path, log_path
 
 
-def _write_task(argv: list[str], env_id: str) -> None:
-    """Write the trained model's task as ``task.json`` beside rl_zoo3's ``config.yml``."""
-    if "-optimize" in argv or "--optimize-hyperparameters" in argv:
-        return
-    folder = _option(argv, "-f", "--log-folder", default="logs")
-    model_path, log_path = _model_path(["--algo", "swirl_dqn", "-f", str(folder)], env_id)
-    task = _saved_task(model_path)
-    from huggingface_sb3 import EnvironmentName
+@contextlib.contextmanager
+def _task_saved_with_each_run() -> Iterator[None]:
+    """While rl_zoo3 trains, write the training env's task (with the reward settings it pays
+    by) as ``task.json`` beside the run's ``config.yml`` when the run starts to learn, for any
+    algorithm: ``enjoy`` runs the agent with it."""
+    from rl_zoo3.exp_manager import ExperimentManager
 
-    params = Path(log_path) / str(EnvironmentName(env_id))
-    if params.is_dir():
-        task.to_json(params / "task.json")
+    learn = ExperimentManager.learn
+
+    def learn_with_the_task_saved(manager: Any, model: Any) -> None:
+        env = model.get_env()
+        if carries_task(env):
+            task = dataclasses.replace(
+                get_swirl_attr(env, "task"), reward_config=get_swirl_attr(env, "reward_config")
+            )
+            task.to_json(Path(manager.params_path) / "task.json")
+        learn(manager, model)
+
+    ExperimentManager.learn = learn_with_the_task_saved
+    try:
+        yield
+    finally:
+        ExperimentManager.learn = learn
 
 
 def _saved_task(model_path: str) -> TaskModel:
@@ -592,18 +616,29 @@ def _saved_task(model_path: str) -> TaskModel:
 def _enjoy(argv: list[str]) -> int:
     from rl_zoo3.enjoy import enjoy
 
-    if _option(argv, "--algo") != "swirl_dqn":
-        _run(enjoy, "enjoy", argv)
-        return 0
     env_id = str(_option(argv, "--env", default="CartPole-v1"))
-    if _option(argv, "-f", "--folder") is None:
-        argv = [*argv, "-f", "logs"]  # rl_zoo3 would look on the hub, which has no swirl_dqn
-    try:
-        model_path, _ = _model_path(argv, env_id)
-        task = _saved_task(model_path)
-    except (AssertionError, ValueError) as exc:  # no such run or model
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    if _option(argv, "--algo") != "swirl_dqn":
+        from huggingface_sb3 import EnvironmentName
+
+        # another algorithm trained on a SWIRL task here: its run holds the task.json
+        try:
+            _, log_path = _model_path(argv, env_id)
+            saved = Path(log_path) / str(EnvironmentName(env_id)) / "task.json"
+        except (AssertionError, ValueError):  # not here: rl_zoo3 looks for it (the hub...)
+            saved = None
+        if saved is None or not saved.is_file():
+            _run(enjoy, "enjoy", argv)
+            return 0
+        task = TaskModel.from_json(saved)
+    else:
+        if _option(argv, "-f", "--folder") is None:
+            argv = [*argv, "-f", "logs"]  # rl_zoo3 would look on the hub: no swirl_dqn there
+        try:
+            model_path, _ = _model_path(argv, env_id)
+            task = _saved_task(model_path)
+        except (AssertionError, ValueError) as exc:  # no such run or model
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     print(f"sb3-swirl: the model's task, {task.n_segments} segments", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "task.json"

@@ -182,6 +182,8 @@ def test_yaml_for_a_plain_gymnasium_env_with_a_demo_file(tmp_path, monkeypatch):
         ({"env": "CartPole-v1"}, "observations have 2 dims, but CartPole-v1's observations have 4"),
         ({"env_wrapper": None}, "swirl_dqn needs the SWIRL task"),
         ({"terminate_on_completion": True}, "terminate_on_completion cannot be used in the zoo"),
+        ({"fit": 0.1}, "SwirlTaskWrapper fit: expected a mapping of settings"),
+        ({"env": "MountainCarContinuous-v0"}, "swirl_dqn needs discrete actions"),
     ],
 )
 def test_bad_yaml_fails_before_training_naming_the_problem(
@@ -206,6 +208,27 @@ def test_bad_yaml_fails_before_training_naming_the_problem(
     err = capsys.readouterr().err
     assert message in err and "bad.yml" in err
     assert not (tmp_path / "logs").exists()  # nothing started
+
+
+def test_another_algorithm_on_a_swirl_task_keeps_the_task_for_enjoy(tmp_path, monkeypatch, capsys):
+    """PPO with the SwirlTaskWrapper: the run keeps its task, and enjoy runs with it even where
+    the demos it was fitted on are gone."""
+    monkeypatch.chdir(tmp_path)
+    _mountaincar_demos(tmp_path / "mountaincar_demos.npz", n=4)
+    wrapper = MOUNTAINCAR_ENTRY["env_wrapper"]
+    entry = {"n_timesteps": 128, "policy": "MlpPolicy", "n_steps": 64, "env_wrapper": wrapper}
+    (tmp_path / "ppo.yml").write_text(yaml.safe_dump({"MountainCar-v0": entry}))
+    args = ["--algo", "ppo", "--env", "MountainCar-v0", "-f", "logs"]
+    assert zoo.main(["train", *args, "-conf", "ppo.yml", "--seed", "0"]) == 0
+    saved = sb3_swirl.TaskModel.from_json(
+        tmp_path / "logs/ppo/MountainCar-v0_1/MountainCar-v0/task.json"
+    )
+    assert saved.reward_config.potential and saved.reward_config.task_reward_weight == 10.0
+    (tmp_path / "mountaincar_demos.npz").unlink()
+    capsys.readouterr()
+    assert zoo.main(["enjoy", *args, "-n", "210", "--no-render"]) == 0
+    out = capsys.readouterr().out
+    assert f"the model's task, {saved.n_segments} segments" in out and "true return" in out
 
 
 @pytest.mark.parametrize(
