@@ -218,10 +218,14 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 raise ValueError(f"cannot write {Path(args.plot) / name}: it is a folder")
     task = TaskModel.from_json(args.task)
     demos = None
-    if args.demos is not None:  # read before anything is printed or written
+    if args.demos is not None:  # read and checked before anything is printed or written
         from sb3_swirl.demos import load_demos
+        from sb3_swirl.plotting import _task_demos
 
-        demos = load_demos(args.demos)
+        try:
+            demos = _task_demos(load_demos(args.demos), task)
+        except ValueError as exc:
+            raise ValueError(f"{args.demos}: {exc}") from None
     _print_task(task)
     if args.plot is not None:
         from sb3_swirl.plotting import plot_rewards, plot_segments, plot_transitions

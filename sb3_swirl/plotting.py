@@ -65,6 +65,17 @@ def _check_task(task: Any) -> None:
         )
 
 
+def _task_demos(demos: Any, task: TaskModel) -> list:
+    """``demos`` as demonstrations, each checked to hold the task's states (naming the demo)."""
+    demos = as_demonstrations(demos)
+    for k, demo in enumerate(demos):
+        try:
+            task.check_state_dim(demo.observations.shape[1])
+        except ValueError as exc:
+            raise ValueError(f"demo {k}: {exc} (demos of another task?)") from None
+    return demos
+
+
 def _segments(task: TaskModel) -> str:
     """The number of segments in words: "1 segment", "3 segments"."""
     return f"{task.n_segments} segment" + ("" if task.n_segments == 1 else "s")
@@ -105,7 +116,7 @@ def plot_segments(
     matplotlib.figure.Figure
     """
     _check_task(task)
-    demos = as_demonstrations(demos)
+    demos = _task_demos(demos, task)
     a, b = (int(d) for d in dims)
     if task.task_dim < 2 or not (0 <= a < task.task_dim and 0 <= b < task.task_dim and a != b):
         raise ValueError(
@@ -196,7 +207,7 @@ def plot_transitions(
     matplotlib.figure.Figure
     """
     _check_task(task)
-    demos = as_demonstrations(demos)
+    demos = _task_demos(demos, task)
     shown = demos[: max(1, int(max_demos))]
     states = [task.featurize(d.observations) for d in demos]
     spread = np.concatenate(states).std(axis=0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sb3_swirl.cli import main
-from sb3_swirl.demos import load_demos
+from sb3_swirl.demos import load_demos, save_demos
 from sb3_swirl.experiments import PRESETS, load_hyperparams, rollouts_to_success
 from swirl_wrappers import TaskModel
 
@@ -61,7 +61,6 @@ def test_fit_reg_covar_reaches_the_regions(tmp_path):
 
 def test_fit_flags_turn_off_nuisance_dims_and_merging(tmp_path, capsys):
     from sb3_swirl.datasets import make_switching_demos
-    from sb3_swirl.demos import save_demos
 
     # 3 dims that move on their own split the transitions (see test_segmentation.py)
     demos, _ = make_switching_demos(
@@ -91,7 +90,6 @@ def test_fit_flags_turn_off_nuisance_dims_and_merging(tmp_path, capsys):
 
 def test_fit_merge_same_dynamics_flag_drops_cuts_within_a_phase(tmp_path, capsys):
     from sb3_swirl.datasets import make_switching_demos
-    from sb3_swirl.demos import save_demos
 
     # goal reaching in 16 dims: the GMM also cuts where the motion slows (test_segmentation.py)
     demos, _ = make_switching_demos("goal_reaching", dim=16, random_state=0)
@@ -142,6 +140,12 @@ def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
     assert main(missing) == 2
     assert "no.npz" in capsys.readouterr().err
     assert not figs.exists()  # nothing written before the error
+    other = tmp_path / "other.npz"  # demos of another task: fewer dims than the task reads
+    save_demos([d.observations[:, :1] for d in load_demos(demos)], other)
+    assert main(["show", str(task), "--plot", str(figs), "--demos", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert "other.npz: demo 0: observation has 1 dims" in err and "Traceback" not in err
+    assert not figs.exists()
 
 
 def test_every_preset_has_tuned_hyperparameters_for_both_methods():
@@ -311,7 +315,7 @@ def test_ctrl_c_in_the_middle_of_a_real_run(tmp_path):
 
 
 def test_fit_auto_prints_which_indicator_it_kept(tmp_path, capsys):
-    from sb3_swirl.demos import make_piecewise_linear_demos, save_demos
+    from sb3_swirl.demos import make_piecewise_linear_demos
 
     path, task_path = tmp_path / "demos.npz", tmp_path / "task.json"
     save_demos(make_piecewise_linear_demos(n_demos=6, random_state=0)[0], path)
@@ -324,7 +328,6 @@ def test_fit_auto_prints_which_indicator_it_kept(tmp_path, capsys):
 
 
 def test_fit_reports_a_demo_at_another_rate_as_one_warning_line(tmp_path, capsys):
-    from sb3_swirl.demos import save_demos
 
     path = tmp_path / "demos.npz"
     assert main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "5", "-o", str(path), "-q"]) == 0
@@ -337,7 +340,7 @@ def test_fit_reports_a_demo_at_another_rate_as_one_warning_line(tmp_path, capsys
 
 
 def test_fit_prints_why_it_dropped_a_region(tmp_path, capsys):
-    from sb3_swirl.demos import make_piecewise_linear_demos, save_demos
+    from sb3_swirl.demos import make_piecewise_linear_demos
 
     demos, switches = make_piecewise_linear_demos(n_demos=6, random_state=0)
     x = demos[5].observations.copy()

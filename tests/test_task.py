@@ -557,3 +557,21 @@ def test_invalid_angles():
     assert only_angles.featurize(np.array([np.pi, 7.0])) == pytest.approx([-1.0, 0.0], abs=1e-12)
     with pytest.raises(ValueError, match="angles use index 2"):
         angle_features(np.zeros(2), [[2]])
+
+
+def test_checked_calls_refuse_nan_and_take_one_trajectory_in_any_holder():
+    task = random_task(4, k=2, p=2)
+    x = np.random.default_rng(0).normal(size=(6, 2))
+    bad = x.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN or inf at step 3"):
+        task.segment_indices(bad)
+    with pytest.raises(ValueError, match="obs holds NaN or inf"):
+        task.reward(bad[3], 0)
+    with pytest.raises(ValueError, match="obs holds NaN or inf"):
+        task.next_segment(np.full(2, np.inf), 0, 0)
+    want = task.segment_indices(x)
+    # an imitation Trajectory holds them as .obs
+    np.testing.assert_array_equal(task.segment_indices(types.SimpleNamespace(obs=x)), want)
+    with pytest.raises(ValueError, match=r"one trajectory of shape .* for many, segment each"):
+        task.segment_indices([x, x[:4]])

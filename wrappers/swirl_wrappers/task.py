@@ -799,6 +799,8 @@ class TaskModel:
         if x.ndim not in (1, 2):
             raise ValueError(f"obs must have shape (obs_dim,) or (n, obs_dim), got {x.shape}")
         self.check_state_dim(x.shape[-1])
+        if not np.isfinite(x).all():
+            raise ValueError("obs holds NaN or inf")
         index = np.asarray(index)
         if index.dtype.kind not in "iu":
             raise ValueError(f"segment index must be an integer, got dtype {index.dtype}")
@@ -836,14 +838,23 @@ class TaskModel:
         """Run the segmentation function along one trajectory of shape (T+1, obs_dim).
 
         ``observations`` is the array, or a demonstration that holds it as ``.observations``
-        (``sb3_swirl.Demonstration``, a Minari episode). ``out[t]`` is the index after
-        observing ``s_t`` (``t = 0``: the start state): the index advances at the first step
-        whose state lies in the next region, exactly as :meth:`next_segment` and the wrappers
-        advance it online, with the same arithmetic.
+        (``sb3_swirl.Demonstration``, a Minari episode) or ``.obs`` (an imitation
+        ``Trajectory``). ``out[t]`` is the index after observing ``s_t`` (``t = 0``: the start
+        state): the index advances at the first step whose state lies in the next region,
+        exactly as :meth:`next_segment` and the wrappers advance it online, with the same
+        arithmetic.
         """
-        x = np.asarray(getattr(observations, "observations", observations), dtype=np.float64)
-        if x.ndim != 2:
-            raise ValueError(f"observations must have shape (T+1, obs_dim), got {x.shape}")
+        held = getattr(observations, "observations", getattr(observations, "obs", observations))
+        try:
+            x = np.asarray(held, dtype=np.float64)
+        except (TypeError, ValueError):  # e.g. a list of demos of different lengths
+            x = None
+        if x is None or x.ndim != 2:
+            got = "" if x is None else f", got shape {x.shape}"
+            raise ValueError(
+                f"observations must be one trajectory of shape (T+1, obs_dim){got}; for many, "
+                "segment each (or use reach_steps)"
+            )
         reached = self.reach_steps([x])[0]
         out = np.zeros(len(x), dtype=np.int64)
         for step in reached[reached >= 0]:
@@ -873,7 +884,13 @@ class TaskModel:
                 raise ValueError(
                     f"trajectory {k}: observations must have shape (T+1, obs_dim), got {x.shape}"
                 )
-            self.check_state_dim(x.shape[-1])
+            try:
+                self.check_state_dim(x.shape[-1])
+            except ValueError as exc:
+                raise ValueError(f"trajectory {k}: {exc}") from None
+            bad = np.flatnonzero(~np.isfinite(x).all(axis=1))
+            if bad.size:
+                raise ValueError(f"trajectory {k}: observations hold NaN or inf at step {bad[0]}")
         if not xs:
             return []
         lengths = [len(x) for x in xs]
