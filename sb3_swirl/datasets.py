@@ -28,7 +28,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from sb3_swirl.demos import Demonstration
-from swirl_wrappers._validation import check_int
+from swirl_wrappers._validation import check_int, check_real
 
 KINDS = ("constant_velocity", "goal_reaching", "linear_dynamics", "one_dimension")
 
@@ -202,6 +202,8 @@ def make_switching_demos(
         for k, v in (("n_demos", n_demos), ("n_phases", n_phases), ("dim", dim))
     )
     nuisance_dims = check_int("nuisance_dims", nuisance_dims, low=0)
+    phase_length = check_real("phase_length", phase_length, low=0.0, low_open=True)
+    noise = check_real("noise", noise, low=0.0)
     if not 0.0 <= time_warp < 1.0:
         raise ValueError(f"time_warp must be in [0, 1), got {time_warp}")
     if speed_ratio < 1.0:

@@ -60,7 +60,7 @@ def _field(item: Any, names: Sequence[str]) -> tuple[bool, Any]:
 
 
 def _numeric(value: Any, what: str) -> np.ndarray:
-    if isinstance(value, Mapping):
+    if isinstance(value, Mapping) or type(value).__name__ == "DictObs":  # imitation's
         raise ValueError(f"{what} are a dict; flatten dict observations/actions first")
     try:
         arr = np.asarray(value)
@@ -87,6 +87,11 @@ def _to_demonstration(item: Any, i: int) -> Demonstration:
         if has_obs:
             acts = _field(item, ("acts", "actions"))[1]
             rews = _field(item, ("rews", "rewards"))[1]
+        elif isinstance(item, Mapping):
+            raise ValueError(
+                f"demo {i} is a mapping without 'observations' or 'obs' (its keys: "
+                f"{sorted(map(str, item))}); give the states under 'observations'"
+            )
         else:
             obs, acts, rews = item, None, None
             if isinstance(item, tuple) and len(item) in (2, 3):  # (obs, acts[, rews])?

@@ -188,7 +188,7 @@ def fit_task(
     )
     if random_state is not None:
         if not isinstance(random_state, np.random.RandomState):  # sklearn takes both
-            random_state = check_int("random_state", random_state, low=0)
+            random_state = check_int("random_state", random_state, low=0, high=2**32 - 1)
         segmenter.set_params(random_state=random_state)
 
     report("validating demonstrations")

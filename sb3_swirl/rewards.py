@@ -386,10 +386,15 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
                     "with sb3_swirl.InverseDynamics, or use the model-free reward"
                 )
         discrete = all(np.asarray(d.actions).ndim == 1 for d in demos)
-        if discrete and not all(
-            np.all(np.asarray(d.actions) == np.round(d.actions)) for d in demos
-        ):
-            raise ValueError("1-D actions must be integers (a Discrete action space)")
+        for i, demo in enumerate(demos):
+            fractional = np.flatnonzero(np.asarray(demo.actions) != np.round(demo.actions))
+            if discrete and fractional.size:
+                step = int(fractional[0])
+                raise ValueError(
+                    f"demo {i}: action {demo.actions[step]:g} at step {step}; actions of shape "
+                    "(T,) are discrete labels (integers). For continuous actions (one value a "
+                    "step, e.g. Pendulum's torque) give shape (T, 1): actions[:, None]"
+                )
         for i, demo in enumerate(demos):
             if discrete and len(demo) and np.min(demo.actions) < 0:
                 raise ValueError(

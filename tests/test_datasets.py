@@ -54,6 +54,10 @@ def test_generator_rejects_bad_arguments():
         make_switching_demos(time_warp=1.0)
     with pytest.raises(ValueError, match="dim"):
         make_switching_demos(dim=0)
+    with pytest.raises(ValueError, match="phase_length must be a finite number > 0"):
+        make_switching_demos(phase_length=0)
+    with pytest.raises(ValueError, match="noise must be a finite number >= 0, got nan"):
+        make_switching_demos(noise=float("nan"))
 
 
 @pytest.mark.parametrize("kind", KINDS)

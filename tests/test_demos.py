@@ -175,6 +175,10 @@ def _bad(index, array):
             r"demo 1: rewards must have shape",
         ),
         (_bad(2, {"observations": {"a": np.zeros((5, 2))}}), "demo 2: observations are a dict"),
+        (
+            _bad(1, {"states": np.zeros((5, 2)), "act": np.zeros(4)}),
+            r"demo 1 is a mapping without 'observations' or 'obs' \(its keys: \['act', 'states'\]",
+        ),
         (_bad(2, np.zeros((1, 2))), "demo 2: needs at least 2 states"),
         (
             [

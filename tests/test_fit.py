@@ -98,7 +98,9 @@ def test_estimators_and_kwargs_are_routed(demos):
         fit_task(demos, reward=3)
     with pytest.raises(ValueError, match=r"reward must be one of \['maxent', 'quadratic'\]"):
         fit_task(demos, reward="quadraticc")
-    with pytest.raises(ValueError, match="random_state must be an integer >= 0, got -1"):
+    with pytest.raises(
+        ValueError, match=r"random_state must be an integer in \[0, 4294967295\], got -1"
+    ):
         fit_task(demos, random_state=-1)
     by_name = fit_task(demos, reward="quadratic", metric="euclidean", random_state=0)
     assert by_name.metadata["reward"]["class"] == "QuadraticRewardLearner"

@@ -160,6 +160,12 @@ def test_state_only_demos_are_refused_naming_the_method():
         ValueError, match=r"demo \d: action -1 at step \d+; .* numbered 0 \.\. n - 1"
     ):
         fit_task(shifted, reward="maxent", reg_covar=0.1, random_state=0)
+    # one torque a step given as shape (T,): read as labels, so say how to give it
+    torques = [Demonstration(d.observations, d.actions * 0.5) for d in collect_demos(PARKING, 3)]
+    with pytest.raises(
+        ValueError, match=r"demo \d: action \d\.5 at step \d+;.* actions\[:, None\]"
+    ):
+        fit_task(torques, reward="maxent", reg_covar=0.1, random_state=0)
     with pytest.raises(ValueError, match="makes 1000000 states"):
         rng = np.random.default_rng(0)
         MaxEntIRLRewardLearner(value_function="tabular", n_bins=10).fit(

@@ -15,11 +15,14 @@ import numpy as np
 
 
 def _interval(low: float | None, high: float | None, low_open: bool, high_open: bool) -> str:
+    def say(x: float) -> str:
+        return str(x) if isinstance(x, int) else f"{x:g}"
+
     if high is None:
-        return "" if low is None else f" {'>' if low_open else '>='} {low:g}"
+        return "" if low is None else f" {'>' if low_open else '>='} {say(low)}"
     if low is None:
-        return f" {'<' if high_open else '<='} {high:g}"
-    return f" in {'(' if low_open else '['}{low:g}, {high:g}{')' if high_open else ']'}"
+        return f" {'<' if high_open else '<='} {say(high)}"
+    return f" in {'(' if low_open else '['}{say(low)}, {say(high)}{')' if high_open else ']'}"
 
 
 def check_real(
@@ -45,12 +48,12 @@ def check_real(
     return float(value)
 
 
-def check_int(name: str, value: Any, *, low: int | None = None) -> int:
-    """``value`` as an int: an integer (Python or numpy, not a bool) of at least ``low``."""
+def check_int(name: str, value: Any, *, low: int | None = None, high: int | None = None) -> int:
+    """``value`` as an int: an integer (Python or numpy, not a bool) in ``low .. high``."""
     ok = isinstance(value, int | np.integer) and not isinstance(value, bool)
-    if not ok or (low is not None and value < low):
+    if not ok or (low is not None and value < low) or (high is not None and value > high):
         raise ValueError(
-            f"{name} must be an integer{_interval(low, None, False, False)}, got {value!r}"
+            f"{name} must be an integer{_interval(low, high, False, False)}, got {value!r}"
         )
     return int(value)
 
