@@ -246,6 +246,11 @@ def run_method(
     max_episodes : int, optional
         Stop the DQN-based methods after this many training episodes (the paper's budgets are in
         rollouts), or at ``total_timesteps``, whichever comes first.
+
+    Returns
+    -------
+    dict
+        The result, in :func:`sb3_swirl.experiments.train_and_evaluate`'s format (above).
     """
     import time
 

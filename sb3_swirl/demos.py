@@ -260,6 +260,25 @@ def check_demos_fit_spaces(
     given (a ``Discrete`` action space), integer actions in ``0 .. n_actions - 1``.
 
     Messages read ``"{source} {n}: observations have 3 dims, {env_note} have 4{hint}"``.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+    state_dim : int
+        The observation dims a demo state must have.
+    n_actions : int or None
+        The size of a ``Discrete`` action space; ``None`` leaves actions unchecked.
+    source : str
+        What a demo is called in messages (``"demonstration"``, ``"demo file x.npz, demo"``).
+    env_note : str
+        What the demos are compared with in messages (``"the environment's observations"``).
+    hint : str
+        Appended to the message about observation dims.
+
+    Raises
+    ------
+    ValueError
+        Naming the first demo that does not fit, the field and the problem.
     """
     for n, demo in enumerate(demos):
         if demo.observations.shape[1] != state_dim:
@@ -425,6 +444,16 @@ def save_demos(demos: Any, path: str | os.PathLike) -> None:
 def load_demos(path: str | os.PathLike) -> list[Demonstration]:
     """Read demonstrations written by :func:`save_demos`, validated as by :func:`as_demonstrations`.
 
+    Parameters
+    ----------
+    path : str or path-like
+        A ``.npz`` file written by :func:`save_demos` (or ``sb3-swirl demos``).
+
+    Returns
+    -------
+    list of Demonstration
+        In the order they were saved, bit for bit as saved.
+
     Raises
     ------
     ValueError
@@ -541,6 +570,16 @@ def to_imitation(demos: Any) -> list[Any]:
 
     Each demonstration becomes a ``TrajectoryWithRew`` when it has rewards, else a
     ``Trajectory``; all are complete episodes (``terminal=True``).
+
+    Parameters
+    ----------
+    demos : anything :func:`as_demonstrations` accepts
+        With actions.
+
+    Returns
+    -------
+    list of imitation.data.types.Trajectory
+        One per demonstration (``TrajectoryWithRew`` where it has rewards).
 
     Raises
     ------

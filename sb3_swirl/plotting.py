@@ -330,6 +330,22 @@ def plot_cut_paths(
 
     ``env`` is a (possibly wrapped) :class:`~sb3_swirl.envs.dvrk.DVRKLineCuttingEnv`; each
     episode is reset with ``seed + i``. Successful cuts are drawn solid, failed ones dashed.
+
+    Parameters
+    ----------
+    model : SB3 algorithm or anything with ``predict(obs, deterministic=True)``
+    env : gymnasium.Env
+        The env the model acts in (SWIRL-wrapped for a SWIRL agent).
+    n_episodes : int
+        Greedy episodes drawn.
+    seed : int
+        Seed of the first episode's reset.
+    path : str or path-like, optional
+        Save the figure there.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     base = env.unwrapped
     fig = _new_figure((7, 3.5))
@@ -383,6 +399,20 @@ def plot_sheet(
     Fig. 11), with the SWIRL segment switches where ``env`` is a
     :class:`~swirl_wrappers.SwirlWrapper`. ``env`` is a (possibly wrapped)
     :class:`~sb3_swirl.envs.dvrk.DVRKTensioningEnv`, reset with ``seed``.
+
+    Parameters
+    ----------
+    model : SB3 algorithm or anything with ``predict(obs, deterministic=True)``
+    env : gymnasium.Env
+        The env the model acts in (SWIRL-wrapped for a SWIRL agent).
+    seed : int
+        Seed of the episode's reset.
+    path : str or path-like, optional
+        Save the figure there.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     from matplotlib.ticker import SymmetricalLogLocator
 

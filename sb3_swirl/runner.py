@@ -140,6 +140,11 @@ def run_sweep(
         digest), JSON-serialisable: stored with each record, and a warning when ``resume``
         keeps records made under another stamp.
 
+    Returns
+    -------
+    list
+        ``function(**job)`` of each job, in the order of ``jobs`` (resumed ones from ``path``).
+
     Raises
     ------
     ValueError

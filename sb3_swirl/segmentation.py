@@ -434,6 +434,11 @@ def ruptures_indicator(
         the noise) and ``log T`` for the kernel cost (bounded by one per step).
     min_size : int
         Fewest steps between change points.
+
+    Returns
+    -------
+    list of int arrays
+        Per demonstration, the steps of its candidate transitions.
     """
     del random_state
     try:

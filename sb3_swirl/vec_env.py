@@ -210,6 +210,17 @@ def get_swirl_attr(env: VecEnv, name: str) -> Any:
     A SWIRL env is a ``SwirlVecEnv`` (possibly under other ``VecEnvWrapper`` s) or a ``VecEnv``
     whose sub-envs are wrapped with ``SwirlWrapper``; both answer SB3's ``get_attr``.
 
+    Parameters
+    ----------
+    env : VecEnv
+    name : str
+        ``"task"``, ``"reward_config"``, ``"terminate_on_completion"`` or ``"state_key"``.
+
+    Returns
+    -------
+    Any
+        The attribute of the first sub-env (every sub-env carries the same).
+
     Raises
     ------
     ValueError
@@ -282,6 +293,11 @@ def make_swirl_env(
         ``DummyVecEnv`` (default) or ``SubprocVecEnv``.
     vec_env_kwargs : dict, optional
         Passed to ``vec_env_cls`` (e.g. ``{"start_method": "spawn"}``).
+
+    Returns
+    -------
+    VecEnv
+        ``n_envs`` sub-envs, each ``Monitor(SwirlWrapper(gym.make(env_id), task))``.
 
     Examples
     --------

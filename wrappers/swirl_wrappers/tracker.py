@@ -35,6 +35,18 @@ def progress_potential(index: Any, segment_reward: Any) -> Any:
     every segment reward is); the result lies in ``(i, i + 1]`` and grows as the state nears
     region ``i``.
 
+    Parameters
+    ----------
+    index : int or int array
+        The segment index(es) ``i``.
+    segment_reward : float or array
+        ``R_i(s)`` for each, at most 0.
+
+    Returns
+    -------
+    float or array
+        ``Phi(s, i)``, of the broadcast shape of the two.
+
     Examples
     --------
     >>> progress_potential(2, 0.0), progress_potential(0, -3.0)

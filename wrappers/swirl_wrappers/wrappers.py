@@ -198,6 +198,18 @@ def observation_state(obs: Any, state_key: StateKey = None) -> np.ndarray:
     """The task state in an observation (or a batch): ``obs`` itself (Box observations), the
     value under ``state_key``, or the values under several keys concatenated in order.
 
+    Parameters
+    ----------
+    obs : array or dict of arrays
+        One observation or a batch (leading axis).
+    state_key : str or sequence of str, optional
+        The Dict key(s) of the task state; ``None`` for Box observations.
+
+    Returns
+    -------
+    numpy.ndarray
+        The state, of shape (state_dim,) or (n, state_dim).
+
     Examples
     --------
     >>> import numpy as np
