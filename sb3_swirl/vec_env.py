@@ -29,6 +29,7 @@ from swirl_wrappers.wrappers import (
     TASK_REWARD_KEY,
     StateKey,
     TrackedTask,
+    _refuse_normalised_states,
 )
 
 __all__ = ["SwirlVecEnv", "get_swirl_attr", "make_swirl_env"]
@@ -115,6 +116,7 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
                     f"SwirlVecEnv must sit below {name}: the task reads raw states. Wrap as "
                     f"{name}(SwirlVecEnv(venv, task)), not SwirlVecEnv({name}(venv), task)"
                 )
+        _refuse_normalised_states(venv, "SwirlVecEnv")  # gymnasium's, in its sub-envs
         self.lifter = Lifter(venv.observation_space, task, state_key)
         self.tracker = SegmentTracker(task, reward_config, num_envs=venv.num_envs)
         super().__init__(venv, observation_space=self.lifter.observation_space)

@@ -564,6 +564,35 @@ def test_normalised_states_below_the_wrapper_are_refused_with_the_right_order(ma
     gym.wrappers.NormalizeObservation(SwirlWrapper(PointEnv(), line_task()))
 
 
+def test_sub_envs_that_normalise_their_observations_are_refused():
+    """CleanRL's make_env normalises each sub-env: the vector wrapper looks into them."""
+
+    def normalised():
+        return gym.wrappers.NormalizeObservation(PointEnv())
+
+    for make, on_top in (
+        (
+            lambda: SwirlVectorWrapper(SyncVectorEnv([normalised, normalised]), line_task()),
+            "vector",
+        ),
+        (lambda: SwirlVecEnv(DummyVecEnv([normalised, normalised]), line_task()), "VecNormalize"),
+    ):
+        with pytest.raises(ValueError, match=f"sub-env 0 normalises its observations.*{on_top}"):
+            make()
+
+
+def test_vector_infos_are_copies_of_the_trackers_state():
+    envs = SwirlVectorWrapper(SyncVectorEnv([PointEnv, PointEnv]), line_task())
+    _, infos = envs.reset(seed=0)
+    before = envs.tracker.index.copy()
+    infos["segment"][:] = 5
+    _, rewards, *_, infos = envs.step(np.zeros(2, dtype=int))
+    rewards *= 0
+    assert envs.tracker.index.tolist() == infos["segment"].tolist()
+    assert np.all(envs.tracker.index >= before) and np.all(envs.tracker.index <= 1)
+    assert np.any(infos["segment_reward"] != 0)
+
+
 def test_vector_partial_reset_with_mask():
     envs = SwirlVectorWrapper(
         SyncVectorEnv([PointEnv, PointEnv], autoreset_mode=AutoresetMode.DISABLED), line_task()
@@ -752,7 +781,7 @@ def test_tracker_refuses_batches_of_the_wrong_shape():
     with pytest.raises(ValueError, match="num_envs"):
         SegmentTracker(task, num_envs=2.7)
     single = SegmentTracker(task)
-    with pytest.raises(ValueError, match=r"one state of shape \(d,\)"):
+    with pytest.raises(ValueError, match=r"one state, a numpy array of shape \(d,\)"):
         single.reset(good)
     single.reset(good[0])
     with pytest.raises(ValueError, match="restart and mask"):

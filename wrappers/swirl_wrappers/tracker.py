@@ -199,7 +199,11 @@ class SegmentTracker:
         n = self.num_envs
         if n is None:
             if getattr(states, "ndim", None) != 1:
-                raise ValueError(f"states must be one state of shape (d,), got {np.shape(states)}")
+                kind = "" if isinstance(states, np.ndarray) else f"a {type(states).__name__} of "
+                raise ValueError(
+                    f"states must be one state, a numpy array of shape (d,), got {kind}shape "
+                    f"{np.shape(states)}"
+                )
             if signals.get("restart") is not None or signals.get("mask") is not None:
                 raise ValueError("restart and mask are for a tracker of num_envs episodes")
             return

@@ -165,9 +165,9 @@ def state_space(
         return space.spaces[keys[0]], keys[0]
     for key in keys:
         _check_state_space(space.spaces[key], None, f"observation space[{key!r}]")
-    joined = spaces.Box(
-        np.concatenate([space.spaces[key].low for key in keys]),
-        np.concatenate([space.spaces[key].high for key in keys]),
+    joined = spaces.Box(  # float64 bounds: float32 infinities cast without a warning
+        np.concatenate([space.spaces[key].low.astype(np.float64) for key in keys]),
+        np.concatenate([space.spaces[key].high.astype(np.float64) for key in keys]),
         dtype=np.float64,
     )
     return joined, keys
@@ -317,6 +317,20 @@ def _refuse_normalised_states(env: Any, wrapper: str) -> None:
                 f"{wrapper}({type(env).__name__}(env), task)"
             )
         env = env.env
+    for i, sub in enumerate(getattr(env, "envs", ())):  # a SyncVectorEnv's (an async one's
+        try:  # sub-envs live in other processes, out of reach)
+            _refuse_normalised_states(sub, wrapper)
+        except ValueError:
+            on_top = (
+                "SB3's VecNormalize(SwirlVecEnv(venv, task))"
+                if wrapper == "SwirlVecEnv"
+                else f"gymnasium.wrappers.vector.NormalizeObservation({wrapper}(envs, task))"
+            )
+            raise ValueError(
+                f"{wrapper} must sit below observation normalisation, but sub-env {i} "
+                "normalises its observations: the task reads raw states. Normalise the "
+                f"vector env on top instead: {on_top}"
+            ) from None
 
 
 def _refuse_monitor_below(env: Any) -> None:
@@ -614,7 +628,7 @@ class SwirlVectorWrapper(TrackedTask, VectorWrapper, gym.utils.RecordConstructor
         obs, infos = self.env.reset(seed=seed, options=options)
         self.tracker.reset(self.lifter.state(obs), mask)
         self._autoreset = self._autoreset & ~mask
-        infos[SEGMENT_KEY] = self.tracker.index
+        infos[SEGMENT_KEY] = self.tracker.index.copy()  # not the tracker's own array
         infos["_" + SEGMENT_KEY] = mask  # the rows that were reset
         return self.lifter.lift(obs, self.tracker.index), infos
 
@@ -647,14 +661,15 @@ class SwirlVectorWrapper(TrackedTask, VectorWrapper, gym.utils.RecordConstructor
             # The ended transitions' keys go with their final_info, as the sub-envs' would.
             final_info = infos.setdefault("final_info", {})
             for key, values in (
-                (SEGMENT_KEY, self.tracker.ended_index),
+                (SEGMENT_KEY, self.tracker.ended_index.copy()),
                 (TASK_REWARD_KEY, np.array(task_rewards)),
-                (SEGMENT_REWARD_KEY, rewards),
+                (SEGMENT_REWARD_KEY, rewards.copy()),
             ):
                 final_info[key], final_info["_" + key] = values, done
-        infos[SEGMENT_KEY] = self.tracker.index
+        # copies: an agent that edits its rewards or infos must not edit the tracker's state
+        infos[SEGMENT_KEY] = self.tracker.index.copy()
         infos["_" + SEGMENT_KEY] = np.ones(self.num_envs, dtype=bool)
         infos[TASK_REWARD_KEY] = np.array(task_rewards)  # the sub-envs reuse their buffer
-        infos[SEGMENT_REWARD_KEY] = rewards
+        infos[SEGMENT_REWARD_KEY] = rewards.copy()
         infos["_" + TASK_REWARD_KEY] = infos["_" + SEGMENT_REWARD_KEY] = stepped
         return self.lifter.lift(obs, self.tracker.index), rewards, terminations, truncations, infos
