@@ -188,6 +188,7 @@ def test_json_round_trip_is_exact(name, tmp_path):
         )
     assert json.loads(text)["schema_version"] == SCHEMA_VERSION
     assert loaded.metadata == task.metadata
+    assert TaskModel.from_json(text.encode()).to_dict() == task.to_dict()  # read as bytes
 
 
 def test_pickle_round_trip():
@@ -226,6 +227,7 @@ def _corrupt(text: str) -> str:
             "version 99",
         ),
         (lambda text: text.replace('"swirl_task"', '"other"'), "'other'"),
+        (lambda text: json.dumps({**json.loads(text), "metadata": []}), "metadata must be a dict"),
     ],
 )
 def test_bad_json_is_a_clear_value_error(make_text, message, tmp_path):

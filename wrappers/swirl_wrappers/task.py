@@ -970,7 +970,7 @@ class TaskModel:
             rewards=each("rewards", QuadraticReward.from_dict),
             dims=data.get("dims"),
             features=one("features", RBFFeatures.from_dict),
-            metadata=data.get("metadata") or {},
+            metadata={} if data.get("metadata") is None else data["metadata"],
             angles=data.get("angles"),
             reward_config=one("reward_config", RewardConfig.from_dict) or RewardConfig(),
         )
@@ -984,12 +984,14 @@ class TaskModel:
         return text
 
     @classmethod
-    def from_json(cls, source: str | os.PathLike) -> TaskModel:
-        """Load from a JSON string or from a path to a JSON file.
+    def from_json(cls, source: str | bytes | os.PathLike) -> TaskModel:
+        """Load from a JSON string (or its UTF-8 bytes) or from a path to a JSON file.
 
         A path-like, or a string naming an existing file, is read as a file; any other string
         that starts like JSON is parsed as JSON text.
         """
+        if isinstance(source, bytes | bytearray):  # JSON text read in binary mode
+            source = source.decode("utf-8")
         text = str(source)
         file = None  # the file read, named in every error
         if (
