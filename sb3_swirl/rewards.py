@@ -11,6 +11,7 @@ sees exactly the segments an agent will be rewarded on.
 
 from __future__ import annotations
 
+import warnings
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Sequence
 from numbers import Integral, Real
@@ -410,6 +411,14 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         segments, regions = segment_transitions(demos, segmentation, features)
         _, featurize = _resolve(segmentation, features)
         n_actions = 1 + max(int(np.max(d.actions)) for d in demos if len(d)) if discrete else 0
+        used = len(np.unique(np.concatenate([d.actions for d in demos]))) if discrete else 0
+        if n_actions > max(16, 2 * used):
+            warnings.warn(
+                f"the demos' action labels reach {n_actions - 1} but only {used} distinct ones "
+                f"are used: MaxEnt IRL models every label 0 .. {n_actions - 1}, which is slow; "
+                f"number the actions 0 .. {used - 1}",
+                stacklevel=2,
+            )
         pooled = np.concatenate([s["x"] for s in segments if len(s["x"])])
         var = pooled.var(axis=0) + 1e-12
         rewards, sizes, loglik, scales = [], [], [], []

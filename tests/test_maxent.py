@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -166,6 +168,12 @@ def test_state_only_demos_are_refused_naming_the_method():
         ValueError, match=r"demo \d: action \d\.5 at step \d+;.* actions\[:, None\]"
     ):
         fit_task(torques, reward="maxent", reg_covar=0.1, random_state=0)
+    # sparse labels: every label up to the largest is modelled, so it says so (stopped there)
+    sparse = [Demonstration(d.observations, d.actions * 20) for d in collect_demos(PARKING, 3)]
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", message="the demos' action labels reach 80 but only 5")
+        with pytest.raises(UserWarning, match=r"number the actions 0 \.\. 4"):
+            fit_task(sparse, reward="maxent", reg_covar=0.1, random_state=0)
     with pytest.raises(ValueError, match="makes 1000000 states"):
         rng = np.random.default_rng(0)
         MaxEntIRLRewardLearner(value_function="tabular", n_bins=10).fit(
