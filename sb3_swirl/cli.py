@@ -432,7 +432,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="where the runs go: local processes (default) or a Ray cluster "
         "(pip install sb3-swirl[ray])",
     )
-    p.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
+    p.add_argument(
+        "--address",
+        default=None,
+        help="with --backend ray: the cluster's address (HEAD:6379, auto for the one started "
+        "on this machine with `ray start --head`, or ray://HEAD:10001); default: a local Ray "
+        "with --jobs workers",
+    )
     p.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
     p.add_argument("--panels", nargs="+", default=None, help="a subset of a figure's panels")
     p.add_argument(

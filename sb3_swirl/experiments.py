@@ -1526,7 +1526,7 @@ def reproduce(
         Demo sets of Fig. 9 (seeds 100, 101, ...; the paper used 100, the full setting 20).
     backend, jobs, address : see :func:`sb3_swirl.runner.run_sweep`
     """
-    from sb3_swirl.runner import run_sweep
+    from sb3_swirl.runner import _key, _read_done, run_sweep
 
     experiment = EXPERIMENTS[check_option("experiment", name, tuple(EXPERIMENTS))]
     # each once, in the order given: a repeated one would count its runs twice
@@ -1550,10 +1550,11 @@ def reproduce(
     console.rule(f"[bold]{experiment.title}: {len(work)} run{'s' * (len(work) != 1)}, {backend}")
     if quick:
         console.print(_quick_note(experiment))
+    runs_file = out / _output_name("runs", ".jsonl", quick)
     records = run_sweep(
         method_run,
         work,
-        out / _output_name("runs", ".jsonl", quick),
+        runs_file,
         backend=backend,
         n_jobs=jobs,
         address=address,
@@ -1573,12 +1574,22 @@ def reproduce(
     warned = sum(bool(run.get("warnings")) for run in runs)
     if warned:
         console.print(f"{warned} of {len(runs)} runs warned (their fits: runs[].warnings)")
+    others = len(_read_done(runs_file)) - len({_key(job) for job in work})
+    if others > 0:  # a resumed sweep of a part: the results cover only that part
+        console.print(
+            f"{runs_file.name} also holds {others} run{'s' * (others != 1)} this command did not "
+            "ask for (other seeds, panels or methods); the results and the figure cover "
+            "only this command's runs: ask for them all, with --resume, to draw them together",
+            soft_wrap=True,
+        )
     results = {
         "figure": name,
         "title": experiment.title,
         "paper_claim": experiment.claim,
         "quick": quick,
         "seeds": seeds,
+        "panels": panels,
+        "methods": methods,
         "backend": backend,
         "stamp": stamp,
         "summary": summary,

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import json
 import os
+import signal
+import socket
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -63,13 +65,36 @@ def _warn_other_settings(
     )
 
 
+def _ignore_interrupts() -> None:
+    """In a worker: leave Ctrl-C (sent to the whole process group) to the main process, which
+    stops the sweep; a worker that took it would print its own traceback, or hang."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _joblib_runs(
     function: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], n_jobs: int
 ) -> Iterator[tuple[dict, Any]]:
     from joblib import Parallel, delayed
 
-    parallel = Parallel(n_jobs=n_jobs, return_as="generator_unordered")
+    parallel = Parallel(
+        n_jobs=n_jobs, return_as="generator_unordered", initializer=_ignore_interrupts
+    )
     yield from parallel(delayed(_call)(function, job) for job in jobs)
+
+
+def _check_reachable(address: str, timeout: float = 10.0) -> None:
+    """Raise unless something listens at a ``host:port`` Ray address (Ray itself would retry
+    the connection without end); ``"auto"`` and ``ray://`` addresses fail on their own."""
+    host, _, port = address.rpartition(":")
+    if address == "auto" or address.startswith("ray://") or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise ValueError(
+            f"no Ray cluster answers at {address} ({exc}): start its head node "
+            "(`ray start --head`) or check the address"
+        ) from None
 
 
 def _ray_runs(
@@ -89,6 +114,7 @@ def _ray_runs(
         if address is None:  # a local instance with n_jobs workers
             ray.init(num_cpus=n_jobs, include_dashboard=False, log_to_driver=False)
         else:
+            _check_reachable(address)
             ray.init(address=address, log_to_driver=False)
     try:
         remote = ray.remote(_call)
@@ -161,6 +187,9 @@ def run_sweep(
     if not os.access(path if path.exists() else path.parent, os.W_OK):  # before any run
         raise ValueError(f"cannot write {path}: no permission to append the runs' records")
     done = _read_done(path)
+    if path.exists() and not path.read_bytes().endswith(b"\n") and path.stat().st_size:
+        with path.open("a") as fh:  # end a line cut short, or the next record would join it
+            fh.write("\n")
     unique = {_key(job): dict(job) for job in jobs}
     pending = [job for key, job in unique.items() if key not in done]
     if stamp is not None:

@@ -402,6 +402,12 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path, capsys):
     assert final["swirl"] > 0  # SWIRL parks within 3000 steps; DQN does not
     again = reproduce("fig2", **kwargs, resume=True)  # every run done: nothing is retrained
     assert again["summary"] == results["summary"]
+    capsys.readouterr()
+    part = reproduce("fig2", **kwargs, methods=["swirl"], resume=True)  # says what it leaves out
+    assert part["methods"] == ["swirl"] and part["runs"] == first["runs"]
+    assert "runs_quick.jsonl also holds 2 runs this command did not ask for" in " ".join(
+        capsys.readouterr().err.split()
+    )
     assert main(["reproduce", "table1", "--resume", "--out", str(tmp_path)]) == 2
     capsys.readouterr()
     assert main(["reproduce", "table2", "--jobs", "3", "--out", str(tmp_path)]) == 2

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
+import signal
+import socket
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from sb3_swirl.runner import run_sweep
+from sb3_swirl.runner import _read_done, run_sweep
 
 JOBS = [{"seed": seed, "scale": scale} for seed in range(3) for scale in (1.0, 10.0)]
 
@@ -47,12 +49,36 @@ def test_an_interrupted_sweep_resumes_to_the_same_results(tmp_path, importable):
     assert resumed == full
     records = [line for line in path.read_text().splitlines() if line.endswith("}")]
     assert len(records) == len(JOBS)  # the three finished runs were not repeated
+    # and the record after the cut line is whole: a next resume would not run it again
+    assert len(_read_done(path)) == len(JOBS)
 
 
 def test_ray_backend_gives_the_same_records_as_joblib(tmp_path, importable):
     pytest.importorskip("ray")
     by_ray = run_sweep(noisy, JOBS, tmp_path / "ray.jsonl", backend="ray", progress=False)
     assert by_ray == [noisy(**job) for job in JOBS]
+
+
+def interrupts_ignored(seed: int) -> bool:
+    return signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+
+
+def test_workers_leave_ctrl_c_to_the_main_process(tmp_path, importable):
+    """Ctrl-C reaches the whole process group: workers ignore it, the main process stops."""
+    assert run_sweep(interrupts_ignored, [{"seed": 0}, {"seed": 1}], tmp_path / "r.jsonl") == [
+        True,
+        True,
+    ]
+    assert not interrupts_ignored(0)
+
+
+def test_a_ray_address_where_nothing_listens_fails_at_once(tmp_path, importable):
+    pytest.importorskip("ray")
+    with socket.socket() as probe:  # a free local port, closed again: nothing listens there
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    with pytest.raises(ValueError, match=f"no Ray cluster answers at 127.0.0.1:{port}"):
+        run_sweep(noisy, JOBS, tmp_path / "r.jsonl", backend="ray", address=f"127.0.0.1:{port}")
 
 
 def test_bad_backend_is_a_clear_error(tmp_path):
