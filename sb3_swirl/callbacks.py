@@ -257,7 +257,6 @@ class TaskEvalCallback(EvalCallback):
             self._episodes.append(summary)
 
     def _init_callback(self) -> None:
-        super()._init_callback()
         _check_discount(self.model, self.training_env)
         trained = carries_task(self.training_env)
         if trained != carries_task(self.eval_env) or (
@@ -271,6 +270,7 @@ class TaskEvalCallback(EvalCallback):
                 "policy reads the segment index of its regions): wrap it as the training env, "
                 "with the same task"
             )
+        super()._init_callback()  # after the check: it makes the log folders
 
     def _on_training_start(self) -> None:
         if self.eval_at_start and not self.evaluations_timesteps:

@@ -222,8 +222,9 @@ def _cmd_show(args: argparse.Namespace) -> int:
         from sb3_swirl.demos import load_demos
         from sb3_swirl.plotting import _task_demos
 
+        demos = load_demos(args.demos)  # its errors name the file
         try:
-            demos = _task_demos(load_demos(args.demos), task)
+            demos = _task_demos(demos, task)
         except ValueError as exc:
             raise ValueError(f"{args.demos}: {exc}") from None
     _print_task(task)
@@ -458,7 +459,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # The fit's messages advise in TransitionStateClustering's arguments; `sb3-swirl fit` says
-# them as its flags (the ones it has).
+# them as its flags (the ones it has). Keyed on the wording of segmentation.py's messages
+# (_warn_lost, _check_complete, fit): tests/test_cli.py checks the translated lines.
 _AS_FLAGS = [
     (re.compile(r"indicator='(\w+)'"), r"--indicator \1"),
     (re.compile(r"min_demo_fraction=(\S+?)(?=[ ,;)]|$)"), r"--min-demo-fraction \1"),
@@ -468,7 +470,6 @@ _AS_FLAGS = [
     (re.compile(r"merge_fragments=True"), "without --no-merge-fragments"),
     (re.compile(r"merge_same_dynamics=False"), "without --merge-same-dynamics"),
     (re.compile(r"merge_same_dynamics=True"), "--merge-same-dynamics"),
-    (re.compile(r"reg_covar=(\S+?)(?=[ ,;)]|$)"), r"--reg-covar \1"),
 ]
 
 

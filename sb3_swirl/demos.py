@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import warnings
 import zipfile
 import zlib
@@ -60,7 +61,8 @@ def _field(item: Any, names: Sequence[str]) -> tuple[bool, Any]:
 
 
 def _numeric(value: Any, what: str) -> np.ndarray:
-    if isinstance(value, Mapping) or type(value).__name__ == "DictObs":  # imitation's
+    types = sys.modules.get("imitation.data.types")  # imitation's DictObs, where it is loaded
+    if isinstance(value, Mapping) or (types is not None and isinstance(value, types.DictObs)):
         raise ValueError(f"{what} are a dict; flatten dict observations/actions first")
     try:
         arr = np.asarray(value)

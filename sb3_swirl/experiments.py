@@ -1574,7 +1574,7 @@ def reproduce(
     warned = sum(bool(run.get("warnings")) for run in runs)
     if warned:
         console.print(f"{warned} of {len(runs)} runs warned (their fits: runs[].warnings)")
-    others = len(_read_done(runs_file)) - len({_key(job) for job in work})
+    others = len(_read_done(runs_file).keys() - {_key(job) for job in work})
     if others > 0:  # a resumed sweep of a part: the results cover only that part
         console.print(
             f"{runs_file.name} also holds {others} run{'s' * (others != 1)} this command did not "

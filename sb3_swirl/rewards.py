@@ -387,17 +387,16 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
                     "with sb3_swirl.InverseDynamics, or use the model-free reward"
                 )
         discrete = all(np.asarray(d.actions).ndim == 1 for d in demos)
-        for i, demo in enumerate(demos):
+        for i, demo in enumerate(demos if discrete else ()):
             fractional = np.flatnonzero(np.asarray(demo.actions) != np.round(demo.actions))
-            if discrete and fractional.size:
+            if fractional.size:
                 step = int(fractional[0])
                 raise ValueError(
                     f"demo {i}: action {demo.actions[step]:g} at step {step}; actions of shape "
                     "(T,) are discrete labels (integers). For continuous actions (one value a "
                     "step, e.g. Pendulum's torque) give shape (T, 1): actions[:, None]"
                 )
-        for i, demo in enumerate(demos):
-            if discrete and len(demo) and np.min(demo.actions) < 0:
+            if len(demo) and np.min(demo.actions) < 0:
                 raise ValueError(
                     f"demo {i}: action {int(np.min(demo.actions))} at step "
                     f"{int(np.argmin(demo.actions))}; discrete actions are numbered 0 .. n - 1, "

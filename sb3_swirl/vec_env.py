@@ -36,7 +36,7 @@ __all__ = ["SwirlVecEnv", "get_swirl_attr", "make_swirl_env"]
 
 #: What every SWIRL env answers to ``VecEnv.get_attr``: sub-envs wrapped with ``SwirlWrapper``
 #: and a ``SwirlVecEnv`` alike.
-SWIRL_ATTRIBUTES = ("task", "reward_config", "terminate_on_completion")
+SWIRL_ATTRIBUTES = ("task", "reward_config", "terminate_on_completion", "state_key")
 
 
 class SwirlVecEnv(TrackedTask, VecEnvWrapper):
@@ -125,14 +125,12 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
         chosen = self._get_indices(indices)
         if attr_name == "segment":  # each sub-env's own, as a SwirlWrapper's
             return [int(self.tracker.index[i]) for i in chosen]
-        if attr_name in (*SWIRL_ATTRIBUTES, "state_key"):
+        if attr_name in SWIRL_ATTRIBUTES:
             return [getattr(self, attr_name)] * len(chosen)
         return self.venv.get_attr(attr_name, indices)
 
     def has_attr(self, attr_name: str) -> bool:
-        return attr_name in (*SWIRL_ATTRIBUTES, "segment", "state_key") or self.venv.has_attr(
-            attr_name
-        )
+        return attr_name in (*SWIRL_ATTRIBUTES, "segment") or self.venv.has_attr(attr_name)
 
     def env_method(
         self,

@@ -257,11 +257,14 @@ class SwirlTaskWrapper(SwirlWrapper):
                 "In Python, make_swirl_env(env_id, task, wrapper_kwargs={'terminate_on_completion'"
                 ": True}) puts Monitor outside"
             )
-        for name, value in (("fit", fit), ("reward_config", reward_config)):
+        for name, value, example in (
+            ("fit", fit, "{reg_covar: 0.1}"),
+            ("reward_config", reward_config, "{mode: potential, task_reward_weight: 1.0}"),
+        ):
             if value is not None and not isinstance(value, Mapping):
                 raise ValueError(
-                    f"SwirlTaskWrapper {name}: expected a mapping of settings "
-                    f"({{reg_covar: 0.1}}), got {value!r}"
+                    f"SwirlTaskWrapper {name}: expected a mapping of settings ({example}), "
+                    f"got {value!r}"
                 )
         saved = os.environ.get(TASK_FILE_ENV)
         reward = {**(reward_config or {}), **getattr(_TRIAL, "reward_config", {})}
@@ -434,6 +437,13 @@ def check_config(
         for w in (wrappers if isinstance(wrappers, list) else [wrappers])
         if isinstance(w, Mapping) and str(next(iter(w))).endswith(".SwirlTaskWrapper")
     ]
+    if algo == "swirl_dqn" and not specs:
+        raise ValueError(
+            f"{where}: swirl_dqn needs the SWIRL task: add an env_wrapper entry "
+            "`sb3_swirl.zoo.SwirlTaskWrapper: {demos: ..., fit: {...}}` (see zoo_configs/)"
+        )
+    if not specs:  # nothing of ours to check: rl_zoo3 builds the env
+        return dict(entry)
     env = gym.make(env_id, **(entry.get("env_kwargs") or {}))
     try:
         if algo == "swirl_dqn" and not isinstance(env.action_space, gym.spaces.Discrete):
@@ -449,11 +459,6 @@ def check_config(
                 SwirlTaskWrapper(env, **spec)
     finally:
         env.close()
-    if algo == "swirl_dqn" and not specs:
-        raise ValueError(
-            f"{where}: swirl_dqn needs the SWIRL task: add an env_wrapper entry "
-            "`sb3_swirl.zoo.SwirlTaskWrapper: {demos: ..., fit: {...}}` (see zoo_configs/)"
-        )
     return dict(entry)
 
 
@@ -536,10 +541,10 @@ def _train(argv: list[str]) -> int:
         hint = ""
         if _option(argv, "-i", "--trained-agent") is not None:
             hint = (
-                " (with -i, the entry's demos and fit must give the task the model was "
-                "trained with)"
+                " (with -i: if the entry's demos or fit changed, they must still give the task "
+                "the model was trained with)"
             )
-        print(f"error: {exc}{hint}", file=sys.stderr)
+        print(f"error: {str(exc) or type(exc).__name__}{hint}", file=sys.stderr)
         return 2
     return 0
 
@@ -585,14 +590,14 @@ def _task_saved_with_each_run() -> Iterator[None]:
 
     learn = ExperimentManager.learn
 
-    def learn_with_the_task_saved(manager: Any, model: Any) -> None:
-        env = model.get_env()
-        if carries_task(env):
+    def learn_with_the_task_saved(manager: Any, model: Any, *args: Any, **kwargs: Any) -> None:
+        env, folder = model.get_env(), getattr(manager, "params_path", None)
+        if carries_task(env) and folder is not None:
             task = dataclasses.replace(
                 get_swirl_attr(env, "task"), reward_config=get_swirl_attr(env, "reward_config")
             )
-            task.to_json(Path(manager.params_path) / "task.json")
-        learn(manager, model)
+            task.to_json(Path(folder) / "task.json")
+        learn(manager, model, *args, **kwargs)
 
     ExperimentManager.learn = learn_with_the_task_saved
     try:

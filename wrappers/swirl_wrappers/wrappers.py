@@ -459,6 +459,7 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
             for key in _keys_read(env.observation_space, task, self.lifter.state_key)
             if key in goal_keys
         ]
+        self._warned_unweighted = False  # compute_reward's warning, once
 
     @property
     def segment(self) -> int:
@@ -521,12 +522,23 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
                 "compute_reward and Dict observations with a 'desired_goal' key)"
             )
         infos = [info] if isinstance(info, dict) else list(info)
-        recorded = [i.get(GOAL_KEY) for i in infos]
-        relabelled = any(goal is None for goal in recorded) or not np.array_equal(
-            np.reshape(recorded, np.shape(desired_goal)), desired_goal
-        )
-        if self._reads_goal and relabelled:
-            raise ValueError(relabelling_refused(self._reads_goal))
+        weight = self.reward_config.task_reward_weight
+        if self._reads_goal or (weight == 0.0 and not self._warned_unweighted):
+            recorded = [i.get(GOAL_KEY) for i in infos]
+            relabelled = any(goal is None for goal in recorded) or not np.array_equal(
+                np.reshape(recorded, np.shape(desired_goal)), desired_goal
+            )
+            if self._reads_goal and relabelled:
+                raise ValueError(relabelling_refused(self._reads_goal))
+            if weight == 0.0 and relabelled:
+                self._warned_unweighted = True  # once per wrapper
+                warnings.warn(
+                    "relabelled goals change no reward here: the agent's reward does not "
+                    "depend on the goal, as the task's reward settings weigh the env's own "
+                    "reward by task_reward_weight=0. Give it a weight (e.g. reward_config="
+                    "{'mode': 'potential'}) for the relabelled goals to count",
+                    stacklevel=2,
+                )
         if any(SEGMENT_REWARD_KEY not in i or TASK_REWARD_KEY not in i for i in infos):
             raise ValueError(
                 "SwirlWrapper.compute_reward needs each step's info (its 'segment_reward' and "
@@ -539,15 +551,6 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
             self.env.get_wrapper_attr("compute_reward")(achieved_goal, desired_goal, info),
             dtype=np.float64,
         ).reshape(task_rewards.shape)
-        weight = self.reward_config.task_reward_weight
-        if weight == 0.0 and relabelled:
-            warnings.warn(
-                "relabelled goals change no reward here: the agent's reward does not "
-                "depend on the goal, as the task's reward settings weigh the env's own reward "
-                "by task_reward_weight=0. Give it a weight (e.g. reward_config={'mode': "
-                "'potential'}) for the relabelled goals to count",
-                stacklevel=2,
-            )
         rewards = segment_rewards + weight * (env_rewards - task_rewards)
         return float(rewards[0]) if isinstance(info, dict) else rewards
 
