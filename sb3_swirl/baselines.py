@@ -24,7 +24,7 @@ from sklearn.exceptions import NotFittedError
 
 from sb3_swirl.demos import Demonstration
 from swirl_wrappers import Lifter, TaskModel, observation_state
-from swirl_wrappers._validation import check_option
+from swirl_wrappers._validation import check_int, check_option
 
 
 class BCPolicy:
@@ -107,6 +107,8 @@ class BCPolicy:
         if isinstance(observation, dict):
             observation = observation_state(observation, self.state_key or "observation")
         x = np.asarray(observation, dtype=np.float64)
+        if x.ndim not in (1, 2):
+            raise ValueError(f"observation must have shape (d,) or (n, d), got {x.shape}")
         action = self.model_.predict(x.reshape(-1, x.shape[-1]))
         return (action if x.ndim == 2 else action[0]), None
 
@@ -158,7 +160,8 @@ def _needs_actions(method: str, demos: Sequence[Demonstration]) -> None:
         if demo.actions is None:
             raise ValueError(
                 f"demo {i} has no actions: method {method!r} learns from demonstrated actions "
-                "(label state-only demos with sb3_swirl.InverseDynamics first)"
+                "(label state-only demos of discrete actions with sb3_swirl.InverseDynamics "
+                "first)"
             )
 
 
@@ -265,6 +268,7 @@ def run_method(
 
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {sorted(METHODS)}")
+    check_int("total_timesteps", total_timesteps, low=1)  # BC's too: one budget for all
     if method != "swirl":
         _needs_actions(method, demos)
     env_kwargs = dict(env_kwargs or {})

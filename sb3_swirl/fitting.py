@@ -54,11 +54,18 @@ class _TaskSpaceModel:
 
     def __init__(self, model: Any, raw: list[Any], mapped: list[Any], transform: Any) -> None:
         self.model, self.transform = model, transform
-        self.raw = {
-            np.asarray(row, dtype=np.float64).tobytes(): obs
-            for r, m in zip(raw, mapped, strict=True)
-            for row, obs in zip(m.observations, r.observations, strict=True)
-        }
+        self.raw: dict[bytes, np.ndarray] = {}
+        for r, m in zip(raw, mapped, strict=True):
+            for row, obs in zip(m.observations, r.observations, strict=True):
+                key = np.asarray(row, dtype=np.float64).tobytes()
+                if key in self.raw and not np.array_equal(self.raw[key], obs):
+                    raise ValueError(
+                        f"demo states {self.raw[key]} and {obs} share their task-space values "
+                        "(dims, angles) but differ in the observation entries left out, so a "
+                        "known model of the observations cannot tell which one to step: give "
+                        "the task the entries the model reads (dims), or the model in task space"
+                    )
+                self.raw[key] = obs
 
     def __call__(self, state: np.ndarray, action: Any) -> np.ndarray:
         key = np.asarray(state, dtype=np.float64).tobytes()

@@ -384,7 +384,8 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
                 raise ValueError(
                     f"demo {i} has no actions: MaxEnt IRL (reward='maxent', "
                     "MaxEntIRLRewardLearner) needs states and actions; label state-only demos "
-                    "with sb3_swirl.InverseDynamics, or use the model-free reward"
+                    "of discrete actions with sb3_swirl.InverseDynamics, or use the model-free "
+                    "reward"
                 )
         discrete = all(np.asarray(d.actions).ndim == 1 for d in demos)
         for i, demo in enumerate(demos if discrete else ()):
@@ -402,7 +403,11 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
                     f"{int(np.argmin(demo.actions))}; discrete actions are numbered 0 .. n - 1, "
                     "as a Discrete action space numbers them (shift labels such as -1/0/+1)"
                 )
-        if not discrete and self.dynamics is not None and callable(self.dynamics):
+        if (
+            not discrete
+            and self.dynamics is not None
+            and (callable(self.dynamics) or len(self.dynamics) not in (2, 3))
+        ):
             raise ValueError(
                 "continuous actions: dynamics must be a linear model (A, B) or (A, B, c) in "
                 "task space"
@@ -505,6 +510,14 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         else:
             a, b, *rest = (np.asarray(m, dtype=float) for m in self.dynamics)
             c = rest[0] if rest else np.zeros(a.shape[0])
+            want = {"A": (x.shape[1],) * 2, "B": (x.shape[1], u.shape[1]), "c": (x.shape[1],)}
+            for name, matrix in zip("ABc", (a, b, c), strict=True):
+                if matrix.shape != want[name]:
+                    raise ValueError(
+                        f"dynamics {name} has shape {matrix.shape}; the task space has "
+                        f"{x.shape[1]} dims (after dims/angles) and the actions {u.shape[1]}, "
+                        f"so s' = A s + B u + c needs {name} of shape {want[name]}"
+                    )
         p, m = b.shape
         t = lambda v: th.tensor(v, dtype=th.float64)  # noqa: E731
         abar = t(np.block([[a, c[:, None]], [np.zeros((1, p)), np.ones((1, 1))]]))

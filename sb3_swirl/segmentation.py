@@ -1334,16 +1334,19 @@ or callable, default "gmm"
             )
         elif n_transition_regions == 0:
             reasons = sorted({d["reason"].split(" (")[0] for d in self.dropped_regions_})
-            parts.append(
+            proposed = (
                 f"no transition region: the indicator proposed {n_candidates} candidate "
                 f"transitions in {sum(len(t) > 0 for t in self.transitions_)} of {n} demos, "
-                + (
+            )
+            if not self.dropped_regions_:
+                dropped = f"but they formed no candidate region ({threshold})"
+            else:
+                dropped = (
                     "and the one candidate region was dropped "
                     if len(self.dropped_regions_) == 1
                     else f"and all {len(self.dropped_regions_)} candidate regions were dropped "
-                )
-                + f"({'; '.join(reasons)}; {threshold}), so the task has one segment to the goal"
-            )
+                ) + f"({'; '.join(reasons)}; {threshold})"
+            parts.append(proposed + dropped + ", so the task has one segment to the goal")
         if lost:
             parts.append(
                 f"dropped {len(lost)} candidate region(s) that all but a few demos share: "

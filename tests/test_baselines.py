@@ -53,6 +53,9 @@ def test_linear_svm_clones_the_parking_supervisor(demos):
         BCPolicy("linear_svm").predict(x)
     policy = BCPolicy("linear_svm", random_state=0).fit(x, y)
     assert np.mean(policy.predict(x)[0] == y) >= 0.9
+    assert policy.predict(x[3])[0] == policy.predict(x)[0][3]  # one observation, one action
+    with pytest.raises(ValueError, match=r"shape \(d,\) or \(n, d\), got \(2, 5, 4\)"):
+        policy.predict(np.stack([x[:5], x[5:10]]))  # never a silent first action of a stack
 
 
 def test_methods_that_need_actions_say_so(demos):

@@ -424,6 +424,32 @@ def test_inverse_dynamics_labels_state_only_demos():
     assert model.replay_buffer.size() == 1500
 
 
+def test_inverse_dynamics_refuses_bad_transitions_naming_the_problem():
+    from sklearn.exceptions import NotFittedError
+
+    from sb3_swirl import InverseDynamics
+
+    rng = np.random.default_rng(0)
+    s, a = rng.normal(size=(50, 2)), rng.integers(3, size=50)
+    with pytest.raises(NotFittedError):
+        InverseDynamics().predict(s, s)
+    nan = s.copy()
+    nan[7, 1] = np.nan
+    for args, match in (
+        ((s, s[:, :1], a), r"one shape .* got \(50, 2\) and \(50, 1\)"),
+        ((nan, s, a), "transition 7 holds NaN"),
+        ((s, s, a[:-1]), r"actions must have shape \(50,\)"),
+        ((s, s, a * 0.5), "is not an integer in 0 .. 2"),
+        ((s, s, a + 1), "is not an integer in 0 .. 2"),
+        ((s[:0], s[:0], a[:0]), "n >= 1"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            InverseDynamics(epochs=1).fit(*args, n_actions=3)
+    fitted = InverseDynamics(epochs=1, seed=0).fit(s, s + 0.1, a, n_actions=3)
+    with pytest.raises(ValueError, match="states have 3 dims; the model was fitted on 2"):
+        fitted.predict(np.zeros((2, 3)), np.zeros((2, 3)))
+
+
 def test_bc_only_with_state_only_demos_and_no_inference_is_skipped():
     state_only = [Demonstration(d.observations) for d in point_demos(2)]
     model = SwirlDQN("MlpPolicy", point_env(), demonstrations=state_only, infer_actions="none")

@@ -70,6 +70,10 @@ def test_linear_gaussian_maxent_recovers_psi_up_to_scale(known_model):
     assert _cosine(weight, psi) >= 0.9
     assert np.all(np.linalg.eigvalsh(weight) >= 0)  # Psi stays positive semi-definite
     assert np.allclose(learner.rewards_[0].target, mu)
+    if known_model:  # a model for other actions, or of other states, is named
+        for bad, match in (((a, b[:, :2]), r"B has shape \(4, 2\)"), ((a,), "linear model")):
+            with pytest.raises(ValueError, match=match):
+                MaxEntIRLRewardLearner(dynamics=bad).fit(demos, [never_reached])
 
 
 def _grid_demos(psi: np.ndarray, goal: np.ndarray, n: int = 9, seed: int = 0):
@@ -180,6 +184,14 @@ def test_state_only_demos_are_refused_naming_the_method():
             [Demonstration(rng.normal(size=(9, 6)), np.zeros(8, int)) for _ in range(2)],
             [Region(np.zeros(6), np.eye(6), 1e-9)],
         )
+
+
+def test_a_known_model_refuses_task_states_it_cannot_tell_apart():
+    """With dims (x, y, theta) a stopping car's states differ only in the speed left out."""
+    demos = collect_demos(PARKING, 3, seed=0)
+    model = gym.make(PARKING).unwrapped.noise_free_step
+    with pytest.raises(ValueError, match=r"share their task-space values .* cannot tell which"):
+        fit_task(demos, dims=[0, 1, 2], reward="maxent", dynamics=model, reg_covar=0.1)
 
 
 def test_noise_free_models_match_the_envs_without_noise():
