@@ -442,6 +442,11 @@ def check_config(
             f"{where}: swirl_dqn needs the SWIRL task: add an env_wrapper entry "
             "`sb3_swirl.zoo.SwirlTaskWrapper: {demos: ..., fit: {...}}` (see zoo_configs/)"
         )
+    if algo == "swirl_dqn" and entry.get("frame_stack"):
+        raise ValueError(
+            f"{where}: frame_stack: swirl_dqn clones the demos' single states, so it cannot "
+            "train on stacked frames (other algorithms can)"
+        )
     if not specs:  # nothing of ours to check: rl_zoo3 builds the env
         return dict(entry)
     env = gym.make(env_id, **(entry.get("env_kwargs") or {}))
