@@ -103,7 +103,9 @@ class SegmentProgressCallback(BaseCallback):
 
     Examples
     --------
-    >>> model.learn(10_000, callback=SegmentProgressCallback())  # doctest: +SKIP
+    ::
+
+        model.learn(10_000, callback=SegmentProgressCallback())
     """
 
     def __init__(self, window_size: int = 100, n_segments: int | None = None, verbose: int = 0):
@@ -201,9 +203,11 @@ class TaskEvalCallback(EvalCallback):
 
     Examples
     --------
-    >>> cb = TaskEvalCallback(eval_env, n_eval_episodes=20, eval_freq=1000)  # doctest: +SKIP
-    >>> model.learn(30_000, callback=cb)  # doctest: +SKIP
-    >>> cb.evaluations_episodes, cb.success_rates  # doctest: +SKIP
+    ::
+
+        cb = TaskEvalCallback(eval_env, n_eval_episodes=20, eval_freq=1000)
+        model.learn(30_000, callback=cb)
+        cb.evaluations_episodes, cb.success_rates  # rollouts run, and the success at each
     """
 
     def __init__(

@@ -301,8 +301,15 @@ def make_swirl_env(
 
     Examples
     --------
-    >>> import sb3_swirl  # registers the sb3_swirl/ env ids  # doctest: +SKIP
-    >>> venv = make_swirl_env("sb3_swirl/ParallelParking-v0", task, n_envs=2)  # doctest: +SKIP
+    >>> from swirl_wrappers import QuadraticReward, Region, TaskModel
+    >>> task = TaskModel(  # hold the pole upright: one region around angle 0
+    ...     regions=[Region(mean=[0.0], covariance=[[0.05**2]], threshold=1.0)],
+    ...     rewards=[QuadraticReward(target=[0.0], weight=[[100.0]])],
+    ...     dims=[2],
+    ... )
+    >>> venv = make_swirl_env("CartPole-v1", task, n_envs=2, seed=0)
+    >>> venv.reset().shape, venv.get_attr("segment")
+    ((2, 6), [1, 1])
     """
     n_envs = check_int("n_envs", n_envs, low=1)
     if isinstance(env, gym.Env) and n_envs != 1:

@@ -41,6 +41,7 @@ def test_every_method_runs_on_a_tiny_budget_with_the_shared_fields(method, demos
     assert 0.0 <= result["final_success"] <= result["best_success"] <= 1.0
     if method.startswith("bc_"):
         assert point["timesteps"] == 0  # cloning uses no env steps
+        assert result["final_success"] > 0  # a clone of 5 parking demos parks at times
     else:
         assert point["timesteps"] >= 500
 

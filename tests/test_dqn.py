@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import torch as th
 from gymnasium import spaces
-from stable_baselines3 import DQN
 from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNormalize
 
 import sb3_swirl.envs  # noqa: F401  (registers the envs)
@@ -474,8 +473,30 @@ def test_bc_agrees_with_parking_demos(parking):
         np.testing.assert_array_equal(model.q_net(x).numpy(), model.q_net_target(x).numpy())
 
 
-def test_tuned_swirl_dqn_parks_after_a_short_run(parking):
-    """The shipped pipeline (preset task, tuned zoo config) parks after 2000 steps."""
+def test_q_learning_on_the_proxy_reward_learns_what_no_demo_showed():
+    """No demos, so no BC start: DQN on the SWIRL proxy reward (potential shaping) goes from
+    never reaching the goal to reaching it, in 4000 steps. (On 12 seeds: 10 of 10 on 11 of them,
+    7 of 10 on one.)"""
+    shaped = {"mode": "potential", "task_reward_weight": 10.0}
+    model = SwirlDQN(
+        "MlpPolicy",
+        point_env(reward_config=shaped),
+        seed=0,
+        learning_starts=200,
+        learning_rate=1e-3,
+        exploration_fraction=0.3,
+        target_update_interval=250,
+        buffer_size=10_000,
+    )
+    assert success_count(model, point_env(), 10, seed=100) == 0
+    model.learn(4_000)
+    assert success_count(model, point_env(), 10, seed=100) >= 8
+
+
+def test_tuned_swirl_dqn_keeps_what_its_bc_start_parks(parking):
+    """The shipped pipeline (preset task, tuned zoo config): the BC start parks, and 2000 steps
+    of Q-learning keep it (on parking the clone of 5 demos already parks in most episodes; the
+    test above shows the Q-learning itself learn)."""
     from sb3_swirl.experiments import _algo_kwargs, _swirl_wrapper_kwargs, load_hyperparams
 
     demos, task = parking
@@ -483,10 +504,12 @@ def test_tuned_swirl_dqn_parks_after_a_short_run(parking):
     kwargs = _algo_kwargs(hyperparams)
     env = SwirlWrapper(gym.make(PARKING), task, **_swirl_wrapper_kwargs(hyperparams))
     model = SwirlDQN(hyperparams["policy"], env, demonstrations=demos, seed=0, **kwargs)
+    assert success_count(model, env, 20, seed=100) == 0  # the untrained network
+    model.pretrain()
+    cloned = success_count(model, env, 20, seed=100)
     model.learn(2_000)
-    assert success_count(model, env, 20, seed=100) >= 16
-    untrained = DQN("MlpPolicy", gym.make(PARKING), seed=0)
-    assert success_count(untrained, gym.make(PARKING), 20, seed=100) == 0
+    trained = success_count(model, env, 20, seed=100)
+    assert cloned >= 16 and trained >= 16, (cloned, trained)
 
 
 def test_zoo_linear_learning_rate_schedule_and_a_bad_one():

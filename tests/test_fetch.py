@@ -377,13 +377,15 @@ def test_keys_extractor_reads_only_its_keys_and_saves(tmp_path):
 
 
 def test_swirl_dqn_learns_fetch_reach_within_a_small_budget():
-    """10 demos, 2000 env steps: the preset's SwirlDQN succeeds on the evaluation episodes."""
+    """10 demos, 2000 env steps: the preset's SwirlDQN succeeds on 8 or more of the 10 final
+    evaluation episodes (it reads 10; measured once, its BC start alone reached 5 of 10 at best,
+    and the same agent with neither BC nor updates 2)."""
     preset = dataclasses.replace(PRESETS["fetchreach"], eval_freq=1_000, n_eval_episodes=10)
     demos = collect_demos(
         preset.env_id, 10, seed=0, state_key=preset.state_key, **preset.demo_env_kwargs
     )
     result = run_method("swirl", preset, demos, seed=0, total_timesteps=2_000)
-    assert result["best_success"] > 0.0
+    assert result["final_success"] >= 0.8
     assert result["n_segments"] == fit_task(demos, random_state=0, **preset.fit_kwargs).n_segments
 
 
