@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
+from gymnasium.envs.registration import EnvSpec
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from hypothesis import HealthCheck, given, settings
@@ -390,10 +391,17 @@ def test_recreatable_from_spec():
     config = RewardConfig(scale=0.5)
     env = SwirlWrapper(gym.make("CartPole-v1"), _cartpole_task(), config)
     spec = env.spec
-    assert spec.additional_wrappers[-1].kwargs["reward_config"] == config
-    again = gym.make(spec)
-    assert isinstance(again, SwirlWrapper) and again.reward_config == config
-    assert again.task.to_dict() == env.task.to_dict()
+    assert spec.additional_wrappers[-1].kwargs["reward_config"] == config.to_dict()
+    for again in (gym.make(spec), gym.make(EnvSpec.from_json(spec.to_json()))):  # also as JSON
+        assert isinstance(again, SwirlWrapper) and again.reward_config == config
+        assert again.task.to_dict() == env.task.to_dict()
+        again.reset(seed=0), env.reset(seed=0)
+        for action in (0, 1, 1, 0):
+            a, b = again.step(action), env.step(action)
+            np.testing.assert_array_equal(a[0], b[0])
+            assert a[1:4] == b[1:4]
+    with pytest.raises(ValueError, match="task must be a TaskModel"):
+        SwirlWrapper(gym.make("CartPole-v1"), "task.json")
 
 
 def test_sb3_dummy_and_subproc_vec_envs():

@@ -14,7 +14,7 @@ reset ``info`` gets ``"segment"``. The environment's own info keys pass through.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -350,6 +350,24 @@ def _refuse_monitor_below(env: Any) -> None:
         env = env.env
 
 
+def _as_task(task: Any) -> TaskModel:
+    """``task``, or the task of a mapping of its fields (as ``TaskModel.to_dict`` writes it, and
+    as a wrapper's ``env.spec`` records it)."""
+    if isinstance(task, Mapping):
+        return TaskModel.from_dict(task)
+    if not isinstance(task, TaskModel):
+        raise ValueError(
+            "task must be a TaskModel (TaskModel.from_json reads a file), got "
+            f"{type(task).__name__}"
+        )
+    return task
+
+
+def _recorded(reward_config: Any) -> Any:
+    """``reward_config`` as ``env.spec`` records it: a RewardConfig as its fields."""
+    return reward_config.to_dict() if isinstance(reward_config, RewardConfig) else reward_config
+
+
 def relabelling_refused(keys: list[str]) -> str:
     """Why hindsight relabelling (``HerReplayBuffer``) cannot work when the task reads ``keys``."""
     return (
@@ -374,8 +392,9 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
     ----------
     env : gymnasium.Env
         Environment with a 1-D Box or a Dict observation space.
-    task : TaskModel
-        The proxy task; its ``dims`` / features must fit the observation.
+    task : TaskModel or dict
+        The proxy task (or its fields, ``TaskModel.to_dict``); its ``dims`` / features must fit
+        the observation.
     reward_config : RewardConfig or dict, optional
         How the agent is rewarded; default ``task.reward_config``. A dict changes only the
         fields it names (:meth:`RewardConfig.updated`).
@@ -425,15 +444,16 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
     def __init__(
         self,
         env: gym.Env,
-        task: TaskModel,
+        task: TaskModel | Mapping[str, Any],
         reward_config: RewardConfig | dict[str, Any] | None = None,
         terminate_on_completion: bool = False,
         state_key: StateKey = None,
     ) -> None:
-        gym.utils.RecordConstructorArgs.__init__(
+        task = _as_task(task)
+        gym.utils.RecordConstructorArgs.__init__(  # as JSON-able values: env.spec.to_json()
             self,
-            task=task,
-            reward_config=reward_config,
+            task=task.to_dict(),
+            reward_config=_recorded(reward_config),
             terminate_on_completion=terminate_on_completion,
             state_key=state_key,
         )
@@ -602,12 +622,13 @@ class SwirlVectorWrapper(TrackedTask, VectorWrapper, gym.utils.RecordConstructor
     def __init__(
         self,
         env: VectorEnv,
-        task: TaskModel,
+        task: TaskModel | Mapping[str, Any],
         reward_config: RewardConfig | dict[str, Any] | None = None,
         state_key: StateKey = None,
     ) -> None:
-        gym.utils.RecordConstructorArgs.__init__(
-            self, task=task, reward_config=reward_config, state_key=state_key
+        task = _as_task(task)
+        gym.utils.RecordConstructorArgs.__init__(  # as JSON-able values
+            self, task=task.to_dict(), reward_config=_recorded(reward_config), state_key=state_key
         )
         VectorWrapper.__init__(self, env)
         _refuse_normalised_states(env, "SwirlVectorWrapper")
