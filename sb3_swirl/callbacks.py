@@ -26,7 +26,7 @@ from stable_baselines3.common.vec_env import (
     unwrap_vec_normalize,
 )
 
-from sb3_swirl.vec_env import carries_task, get_swirl_attr, same_task
+from sb3_swirl.vec_env import get_swirl_attr, same_task, swirl_task
 from swirl_wrappers._io import atomic_write
 from swirl_wrappers._validation import check_int
 
@@ -50,7 +50,7 @@ def _check_discount(model: Any, env: VecEnv) -> None:
     from sb3_swirl.dqn import SwirlDQN
 
     gamma = getattr(model, "gamma", None)
-    if gamma is None or isinstance(model, SwirlDQN) or not carries_task(env):
+    if gamma is None or isinstance(model, SwirlDQN) or swirl_task(env) is None:
         return
     mismatch = get_swirl_attr(env, "reward_config").discount_mismatch(gamma, type(model).__name__)
     if mismatch:
@@ -120,8 +120,8 @@ class SegmentProgressCallback(BaseCallback):
     def _init_callback(self) -> None:
         _check_discount(self.model, self.training_env)
         if self.n_segments is None:
-            swirl = carries_task(self.training_env)  # else success and return only
-            self.n_segments = get_swirl_attr(self.training_env, "task").n_segments if swirl else 0
+            task = swirl_task(self.training_env)  # none: success and return only
+            self.n_segments = 0 if task is None else task.n_segments
         # learn() resets the env (a new _last_obs) unless it goes on with reset_num_timesteps=False:
         # then the running episodes go on too
         n_envs = self.training_env.num_envs
@@ -262,12 +262,9 @@ class TaskEvalCallback(EvalCallback):
 
     def _init_callback(self) -> None:
         _check_discount(self.model, self.training_env)
-        trained = carries_task(self.training_env)
-        if trained != carries_task(self.eval_env) or (
-            trained
-            and not same_task(
-                get_swirl_attr(self.training_env, "task"), get_swirl_attr(self.eval_env, "task")
-            )
+        trained, evaluated = swirl_task(self.training_env), swirl_task(self.eval_env)
+        if (trained is None) != (evaluated is None) or (
+            trained is not None and not same_task(trained, evaluated)
         ):
             raise ValueError(
                 "TaskEvalCallback's eval_env must carry the training env's SWIRL task (the "

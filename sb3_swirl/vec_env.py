@@ -192,15 +192,14 @@ def same_task(a: TaskModel, b: TaskModel) -> bool:
     )
 
 
-def carries_task(env: Any) -> bool:
-    """Whether ``env`` is a SWIRL env: a ``VecEnv`` whose ``get_attr("task")`` is a TaskModel
-    (a Fetch env's own ``task`` attribute is a name)."""
+def swirl_task(env: Any) -> TaskModel | None:
+    """The task of a SWIRL env (a ``VecEnv`` whose ``get_attr("task")`` is a TaskModel), or
+    ``None`` for any other env (a Fetch env's own ``task`` attribute is a name)."""
     # has_attr first: a get_attr that fails inside a SubprocVecEnv worker kills the worker
-    return (
-        isinstance(env, VecEnv)
-        and env.has_attr("task")
-        and isinstance(env.get_attr("task", indices=[0])[0], TaskModel)
-    )
+    if not (isinstance(env, VecEnv) and env.has_attr("task")):
+        return None
+    task = env.get_attr("task", indices=[0])[0]
+    return task if isinstance(task, TaskModel) else None
 
 
 def get_swirl_attr(env: VecEnv, name: str) -> Any:
@@ -226,13 +225,14 @@ def get_swirl_attr(env: VecEnv, name: str) -> Any:
     ValueError
         If the env carries no SWIRL task, with a hint on how to wrap it.
     """
-    if not carries_task(env):
+    task = swirl_task(env)
+    if task is None:
         raise ValueError(
             "the environment carries no SWIRL proxy task: wrap it first, e.g. "
             "`SwirlWrapper(env, task)` in every sub-env, `make_swirl_env(env_id, task, "
             "n_envs=...)` or `SwirlVecEnv(venv, task)`"
         )
-    return env.get_attr(name, indices=[0])[0]
+    return task if name == "task" else env.get_attr(name, indices=[0])[0]
 
 
 @dataclass

@@ -48,7 +48,7 @@ import numpy as np
 import yaml
 
 from sb3_swirl.demos import Demonstration, check_demos_fit_spaces, load_demos
-from sb3_swirl.vec_env import carries_task, get_swirl_attr
+from sb3_swirl.vec_env import get_swirl_attr, swirl_task
 from swirl_wrappers import RewardConfig, SwirlWrapper, TaskModel
 from swirl_wrappers.wrappers import StateKey, state_space
 
@@ -597,11 +597,10 @@ def _task_saved_with_each_run() -> Iterator[None]:
 
     def learn_with_the_task_saved(manager: Any, model: Any, *args: Any, **kwargs: Any) -> None:
         env, folder = model.get_env(), getattr(manager, "params_path", None)
-        if carries_task(env) and folder is not None:
-            task = dataclasses.replace(
-                get_swirl_attr(env, "task"), reward_config=get_swirl_attr(env, "reward_config")
-            )
-            task.to_json(Path(folder) / "task.json")
+        task = swirl_task(env)
+        if task is not None and folder is not None:
+            paid = get_swirl_attr(env, "reward_config")
+            dataclasses.replace(task, reward_config=paid).to_json(Path(folder) / "task.json")
         learn(manager, model, *args, **kwargs)
 
     ExperimentManager.learn = learn_with_the_task_saved
