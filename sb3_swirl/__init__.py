@@ -46,6 +46,7 @@ from sb3_swirl.segmentation import (
     SegmentationWarning,
     TransitionStateClustering,
     dynamics_cv_error,
+    phases_indicator,
     ruptures_indicator,
     switch_scores,
 )
@@ -88,6 +89,7 @@ __all__ = [
     "load_demos",
     "make_swirl_env",
     "make_switching_demos",
+    "phases_indicator",
     "plot_cut_paths",
     "plot_rewards",
     "plot_segments",

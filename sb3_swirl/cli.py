@@ -135,6 +135,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         segmentation["ignore_nuisance_dims"] = False
     if args.merge_same_dynamics:
         segmentation["merge_same_dynamics"] = True
+    if args.no_align_entries:
+        segmentation["align_entries"] = False
     reward = {"metric": args.metric}
     with console.status(f"fitting SWIRL on {len(demos)} demos...") as status:
         task = fit_task(
@@ -322,10 +324,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_seed, default=0, help="seed of the fit (default 0)")
     p.add_argument(
         "--indicator",
-        default="gmm",
-        help="gmm (default, the paper's), auto (the best of gmm, velocity and linear by how "
-        "well locally linear dynamics explain the demos), velocity, linear, ruptures (needs "
-        "the ruptures package), or several joined by '+'",
+        default="auto",
+        help="auto (default: the best of gmm, velocity, linear and phases by how well locally "
+        "linear dynamics explain the demos), gmm (the paper's), velocity, linear, phases "
+        "(phases with their own linear dynamics, shared by every demo), ruptures (needs the "
+        "ruptures package), or several joined by '+'",
     )
     p.add_argument(
         "--window",
@@ -365,6 +368,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="drop each transition region without which the demos are explained as locally "
         "linear dynamics as well (cuts where the motion only slows down within a phase)",
+    )
+    p.add_argument(
+        "--no-align-entries",
+        action="store_true",
+        help="build each region from the demos' transition states, as the paper's Algorithm 1 "
+        "does (by default from their states up to a window later, where entering the region "
+        "best matches the demos' own transitions)",
     )
     p.add_argument(
         "--metric",

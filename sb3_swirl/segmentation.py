@@ -6,18 +6,21 @@ GMM clusters the transition states (state and time); clusters that do not hold a
 :class:`swirl_wrappers.Region`, and the regions, ordered by time, define the Markov segmentation
 function of the proxy task.
 
-Four indicators are provided (§9.5 of the paper compares the first three), several can be
+Five indicators are provided (§9.5 of the paper compares the first three), several can be
 joined (``"gmm+velocity"``: the union of their candidates), and any callable
 ``f(states, random_state) -> list of index arrays`` can be plugged in:
 
-* :func:`gmm_indicator` -- GMM on windows normalised to their first state (the default, §5.3);
+* :func:`gmm_indicator` -- GMM on windows normalised to their first state (the paper's, §5.3);
 * :func:`velocity_indicator` -- a change in the direction of velocity;
 * :func:`linear_indicator` -- a change of local linear dynamic regime;
+* :func:`phases_indicator` -- phases with their own linear dynamics that every demonstration
+  goes through in order, fitted to all demonstrations together;
 * :func:`ruptures_indicator` -- change points of the velocity from the ``ruptures`` library.
 
-``indicator="auto"`` fits with each of the first three and keeps the segmentation under
-which locally linear dynamics best predict the demonstrations (:func:`dynamics_cv_error`,
-leave one demonstration out).
+``indicator="auto"`` (the default) fits with each of the first four and keeps the segmentation
+under which locally linear dynamics best predict the demonstrations (:func:`dynamics_cv_error`,
+leave one demonstration out). Each transition region is then placed where the online
+segmentation enters it closest to the demonstrations' own transitions (``align_entries``).
 
 ``benchmarks/bench_segmentation.py`` measures them against known switch points
 (:func:`switch_scores`) on :func:`sb3_swirl.datasets.make_switching_demos`.
@@ -469,9 +472,241 @@ def ruptures_indicator(
     return out
 
 
-_INDICATORS = ("gmm", "velocity", "linear", "ruptures")
-_AUTO_CANDIDATES = ("gmm", "velocity", "linear")  # the paper's Fig. 6, in order of preference
-_BUILTIN = (gmm_indicator, velocity_indicator, linear_indicator, ruptures_indicator)
+def _phase_dp(cost: np.ndarray, min_size: int) -> tuple[np.ndarray, float]:
+    """Cut one demonstration into the phases ``0 .. K-1`` in order, at the least total cost.
+
+    ``cost[t, k]`` is the cost of transition ``t`` in phase ``k``; every phase holds at least
+    ``min_size`` transitions (the caller checks ``len(cost) >= K * min_size``). Dynamic
+    programming with running minima: O(K T).
+    """
+    n, n_phases = cost.shape
+    prefix = np.vstack([np.zeros((1, n_phases)), np.cumsum(cost, axis=0)])
+    best = np.full((n_phases, n + 1), np.inf)  # best[k, t]: transitions < t in phases 0 .. k
+    start = np.zeros((n_phases, n + 1), dtype=np.int64)  # where phase k then starts
+    best[0, min_size:] = prefix[min_size:, 0]
+    steps = np.arange(n + 1 - min_size)
+    for k in range(1, n_phases):
+        before = best[k - 1, : n + 1 - min_size] - prefix[: n + 1 - min_size, k]
+        running = np.minimum.accumulate(before)
+        start[k, min_size:] = np.maximum.accumulate(np.where(before <= running, steps, 0))
+        best[k, min_size:] = running + prefix[min_size:, k]
+    labels = np.empty(n, dtype=np.int64)
+    end = n
+    for k in range(n_phases - 1, -1, -1):
+        begin = int(start[k, end]) if k else 0
+        labels[begin:end] = k
+        end = begin
+    return labels, float(best[-1, n])
+
+
+class _PhaseData:
+    """Steps ``s_{t+1} - s_t`` of demonstrations and their affine features ``[m_t, 1]``, at the
+    midpoint ``m_t = (s_t + s_{t+1}) / 2`` (the centred estimate of a derivative), pooled."""
+
+    def __init__(self, states: list[np.ndarray]) -> None:
+        self.feats = np.concatenate(
+            [np.column_stack([(x[:-1] + x[1:]) / 2, np.ones(len(x) - 1)]) for x in states]
+        )
+        self.steps = np.concatenate([np.diff(x, axis=0) for x in states])
+        self.bounds = np.cumsum([0] + [len(x) - 1 for x in states])
+
+    def split(self, values: np.ndarray) -> list[np.ndarray]:
+        return [values[a:b] for a, b in zip(self.bounds[:-1], self.bounds[1:], strict=True)]
+
+    def models(self, labels: np.ndarray, n_phases: int, penalty: np.ndarray) -> np.ndarray:
+        """Ridge fit of one affine model per phase, shape (K, p + 1, p)."""
+        out = np.empty((n_phases, self.feats.shape[1], self.steps.shape[1]))
+        for k in range(n_phases):
+            z, y = self.feats[labels == k], self.steps[labels == k]
+            out[k] = np.linalg.solve(z.T @ z + penalty, z.T @ y)
+        return out
+
+    def assign(self, models: np.ndarray, min_size: int) -> tuple[np.ndarray, float]:
+        """Each demonstration's best cut into the phases in order, and the total cost."""
+        residual = np.matmul(self.feats, models) - self.steps
+        cost = np.einsum("knp,knp->nk", residual, residual)
+        labels, total = [], 0.0
+        for part in self.split(cost):
+            lab, c = _phase_dp(part, min_size)
+            labels.append(lab)
+            total += c
+        return np.concatenate(labels), total
+
+    def refine(
+        self,
+        labels: np.ndarray,
+        n_phases: int,
+        min_size: int,
+        penalty: np.ndarray,
+        max_iter: int = 10,
+    ) -> tuple[np.ndarray, float]:
+        """Alternate fitting the models and cutting the demonstrations (hard EM)."""
+        total = math.inf
+        for _ in range(max_iter):
+            new, total = self.assign(self.models(labels, n_phases, penalty), min_size)
+            if np.array_equal(new, labels):
+                break
+            labels = new
+        return labels, total
+
+    def uniform(self, n_phases: int) -> np.ndarray:
+        """Every demonstration cut into ``n_phases`` equal parts."""
+        return np.concatenate([np.arange(n) * n_phases // n for n in np.diff(self.bounds)]).astype(
+            np.int64
+        )
+
+    def split_one(self, labels: np.ndarray, n_phases: int, min_size: int, penalty: np.ndarray):
+        """``n_phases + 1`` phases from ``n_phases``: each phase in turn halved in every
+        demonstration (then one refit and cut); the split that explains the steps best."""
+        best: tuple[np.ndarray, float] | None = None
+        for j in range(n_phases):
+            out = []
+            for lab in self.split(labels):
+                lab = np.where(lab > j, lab + 1, lab)
+                rows = np.flatnonzero(lab == j)
+                if len(rows) >= 2:
+                    lab[rows[len(rows) // 2] : rows[-1] + 1] = j + 1
+                out.append(lab)
+            fit = self.refine(np.concatenate(out), n_phases + 1, min_size, penalty, max_iter=1)
+            if best is None or fit[1] < best[1]:
+                best = fit
+        assert best is not None
+        return best[0]
+
+    def cv_error(self, labels: np.ndarray, n_phases: int, penalty: np.ndarray) -> float:
+        """Mean squared error of each demo's steps under models fitted on the other demos."""
+        n_demos, p1 = len(self.bounds) - 1, self.feats.shape[1]
+        gram = np.zeros((n_demos, n_phases, p1, p1))
+        cross = np.zeros((n_demos, n_phases, p1, self.steps.shape[1]))
+        for d, (a, b) in enumerate(zip(self.bounds[:-1], self.bounds[1:], strict=True)):
+            for k in np.unique(labels[a:b]):  # phases are contiguous, but a mask is simplest
+                rows = np.flatnonzero(labels[a:b] == k) + a
+                z = self.feats[rows]
+                gram[d, k] = z.T @ z
+                cross[d, k] = z.T @ self.steps[rows]
+        models = np.linalg.solve(gram.sum(0) - gram + penalty, cross.sum(0) - cross)
+        owner = np.repeat(np.arange(n_demos), np.diff(self.bounds))
+        residual = np.matmul(self.feats[:, None, :], models[owner, labels])[:, 0] - self.steps
+        return float((residual**2).sum() / len(self.steps))
+
+
+def phases_indicator(
+    states: list[np.ndarray],
+    random_state: Any = None,
+    *,
+    max_phases: int = 8,
+    min_size: int = _DEFAULT_WINDOW,
+    ridge: float = 1.0,
+    tolerance: float = 0.03,
+    ignore_nuisance_dims: bool = True,
+    max_samples: int = 20_000,
+) -> list[np.ndarray]:
+    """Candidate transitions where the demonstrations pass from one shared phase to the next.
+
+    The model is the one SWIRL assumes (§5): every demonstration goes through the same phases
+    in the same order, each phase with its own locally linear dynamics. For ``K = 1, 2, ...``
+    phases, one affine model per phase, ``s_{t+1} - s_t = W_k [m_t, 1]`` at the midpoint
+    ``m_t = (s_t + s_{t+1}) / 2`` (ridge on the standardised states), is fitted to all
+    demonstrations together, alternating with cutting each demonstration into the ``K``
+    phases in order by dynamic programming (hard EM, from equal parts and from the ``K - 1``
+    fit with one of its phases halved, the split that fits best; the better start is kept).
+    ``K`` is the fewest phases whose leave-one-demonstration-out error (each demo's steps
+    predicted by the models of the others) is within ``tolerance`` of the lowest: a phase that
+    only soaks up the few steps around a switch lowers the error by less. A change between
+    transitions ``t - 1`` and ``t`` is reported at step ``t``. Unlike the windowed indicators
+    it pools every demonstration, so it finds a change too slight to see in one noisy demo.
+
+    Parameters
+    ----------
+    states : list of arrays of shape (T_i + 1, p)
+    random_state : int, RandomState or None
+        Chooses the demonstrations the models are fitted on when they hold more than
+        ``max_samples`` steps (all demonstrations are cut).
+    max_phases : int
+        Most phases tried (fewer when a demo has under ``K * min_size`` steps).
+    min_size : int
+        Fewest steps of a phase in every demonstration.
+    ridge : float
+        Ridge penalty on the linear part (standardised units).
+    tolerance : float
+        Relative slack on the lowest error when choosing the number of phases.
+    ignore_nuisance_dims : bool
+        Leave out the dimensions that move on their own in each demonstration (as
+        ``TransitionStateClustering(ignore_nuisance_dims=True)`` does; see
+        ``_shared_course_dims``).
+    max_samples : int
+        At most about this many steps (whole demonstrations, drawn at random) to fit on.
+
+    Returns
+    -------
+    list of int arrays
+        Candidate transition steps per demonstration (``K - 1`` each; none when ``K = 1``).
+
+    Examples
+    --------
+    >>> from sb3_swirl.datasets import make_switching_demos
+    >>> demos, switches = make_switching_demos("goal_reaching", random_state=0)
+    >>> phases_indicator([d.observations for d in demos])[0].tolist(), switches[0].tolist()
+    ([33, 45, 63, 91, 107], [46, 91])
+
+    Extra candidates (a short phase where a demonstrator slows down before a switch, at its
+    own speed) are left to the clustering, which keeps the transitions every demonstration
+    shares:
+
+    >>> tsc = TransitionStateClustering(indicator="phases", random_state=0).fit(demos)
+    >>> tsc.switches_[0].tolist()
+    [46, 89]
+    """
+    rs = check_random_state(random_state)
+    if ignore_nuisance_dims and len(states) > 1:
+        shared = _shared_course_dims(states)
+        if shared is not None:
+            states = [x[:, shared] for x in states]
+    pooled = np.concatenate(states)
+    mean, scale = pooled.mean(axis=0), _scale(pooled)
+    standard = [(x - mean) / scale for x in states]
+    order = rs.permutation(len(standard))
+    sizes = np.cumsum([len(standard[i]) - 1 for i in order])
+    subset = np.sort(order[: max(2, int(np.searchsorted(sizes, max_samples)) + 1)])
+    fit_on = _PhaseData([standard[i] for i in subset])
+    p = pooled.shape[1]
+    penalty = ridge * np.diag(np.r_[np.ones(p), 1e-6])  # the bias barely penalised
+    shortest = min(len(x) - 1 for x in standard)
+    fits: dict[int, tuple[float, np.ndarray]] = {}
+    labels = None
+    for n_phases in range(1, min(max_phases, shortest // min_size) + 1):
+        starts = [fit_on.uniform(n_phases)]
+        if labels is not None:
+            starts.append(fit_on.split_one(labels, n_phases - 1, min_size, penalty))
+        labels = min(
+            (fit_on.refine(s, n_phases, min_size, penalty) for s in starts), key=lambda f: f[1]
+        )[0]
+        fits[n_phases] = (fit_on.cv_error(labels, n_phases, penalty), labels)
+        if len(fits) - min(fits, key=lambda k: fits[k][0]) >= 2:  # two without improving
+            break
+    if not fits:
+        return [np.zeros(0, dtype=np.int64) for _ in states]
+    lowest = min(error for error, _ in fits.values())
+    n_phases = min(k for k, (error, _) in fits.items() if error <= lowest * (1 + tolerance))
+    data = _PhaseData(standard)
+    models = fit_on.models(fits[n_phases][1], n_phases, penalty)
+    labels = data.assign(models, min_size)[0]
+    return [
+        _interior(np.flatnonzero(np.diff(lab)) + 1, len(x))
+        for lab, x in zip(data.split(labels), states, strict=True)
+    ]
+
+
+_INDICATORS = ("gmm", "velocity", "linear", "phases", "ruptures")
+# the paper's Fig. 6, then ours; in order of preference (ties go to the first)
+_AUTO_CANDIDATES = ("gmm", "velocity", "linear", "phases")
+_BUILTIN = (
+    gmm_indicator,
+    velocity_indicator,
+    linear_indicator,
+    phases_indicator,
+    ruptures_indicator,
+)
 
 
 # ---------------------------------------------------------------------------- regions
@@ -558,6 +793,11 @@ def _make_disjoint(regions: list[Region], margin: float = 0.99) -> list[Region]:
         else Region(r.mean, r.covariance, r.threshold * f**2, time_bounds=r.time_bounds)
         for r, f in zip(regions, factors, strict=True)
     ]
+
+
+def _n_complete(segments: Sequence[np.ndarray]) -> int:
+    """Demonstrations that reach every region in order, the first after their start."""
+    return sum(bool(b[0] != 0 and (b >= 0).all()) for b in segments)
 
 
 def _apart_in_time(a: Region, b: Region) -> bool:
@@ -829,21 +1069,24 @@ class TransitionStateClustering(StrictParamsMixin, BaseEstimator):
 
     Parameters
     ----------
-    indicator : {"gmm", "auto", "velocity", "linear", "ruptures"}, several joined by "+", \
-or callable, default "gmm"
+    indicator : {"auto", "gmm", "velocity", "linear", "phases", "ruptures"}, several joined \
+by "+", or callable, default "auto"
         Transition indicator (the README's "Choosing a transition indicator" compares them).
-        ``"auto"`` fits with each of the paper's three indicators (``"gmm"``, §5.3;
-        ``"velocity"``; ``"linear"``) and keeps the segmentation that best explains the
-        demonstrations as locally linear dynamics (the lowest :func:`dynamics_cv_error`);
-        only the kept fit's warnings are shown, ``indicator_`` says which it kept and
-        ``indicator_scores_`` gives every score. It finds switch points best (README), but
-        SwirlDQN did worse with it on the one env where both were tried. ``"ruptures"``
-        needs the ``ruptures`` package; ``"gmm+velocity"`` takes the union of both
-        indicators' candidates. A callable ``f(states, random_state) -> list of int arrays``
-        gets the list of task-space state arrays (T_i + 1, p) and an int seed and returns
-        candidate transition steps per demonstration (use ``functools.partial`` of
-        :func:`gmm_indicator`, :func:`velocity_indicator`, :func:`linear_indicator` or
-        :func:`ruptures_indicator` to change their settings).
+        ``"auto"`` fits with each of the paper's three indicators (``"gmm"``, §5.3, the
+        paper's default; ``"velocity"``; ``"linear"``) and with ``"phases"``
+        (:func:`phases_indicator`: phases with their own linear dynamics, shared by every
+        demonstration) and keeps the segmentation that best explains the demonstrations as
+        locally linear dynamics (the lowest :func:`dynamics_cv_error`); only the kept fit's
+        warnings are shown, ``indicator_`` says which it kept and ``indicator_scores_`` gives
+        every score. It is the default because it found switch points best on
+        ``benchmarks/bench_segmentation.py`` (README); every shipped task's entry fits with
+        ``"gmm"`` instead (or ``"velocity"``), the segmentations their agents were tuned on.
+        ``"ruptures"`` needs the ``ruptures`` package; ``"gmm+velocity"`` takes the union of
+        both indicators' candidates. A callable ``f(states, random_state) -> list of int
+        arrays`` gets the list of task-space state arrays (T_i + 1, p) and an int seed and
+        returns candidate transition steps per demonstration (use ``functools.partial`` of
+        :func:`gmm_indicator`, :func:`velocity_indicator`, :func:`linear_indicator`,
+        :func:`phases_indicator` or :func:`ruptures_indicator` to change their settings).
     window : int, optional
         Window length of the indicators (``--window`` in the CLI). By default 3 for ``"gmm"``
         and ``"velocity"``; ``"linear"`` then uses its own default, ``max(2 (p + 1), 8)``
@@ -901,6 +1144,15 @@ or callable, default "gmm"
         swing-up phases, parking's, Fetch pick-and-place's down to one segment), where the
         agents were not measured with it, so it is off by default (README, "Choosing a
         transition indicator"). Dropped regions are recorded in ``dropped_regions_``.
+    align_entries : bool, default True
+        Build each transition region from the demonstrations' states up to ``window`` steps
+        (at the common rate) after their transitions, at the offset where entering the region
+        online best matches them (``_align_entries``). A demonstration that slows down into a
+        transition under noise is inside the region of its transition states several steps
+        early, and the segmentation an agent gets then switches early; just after the
+        transition it moves on quickly. ``False`` builds the regions from the transition states
+        themselves, as Algorithm 1 does (every shipped task's fit does: its agent was tuned
+        so). Chosen by ``benchmarks/bench_segmentation.py`` (README).
     confidence : float, default 0.95
         Chi-square confidence level of the region ellipsoids (before shrinking for
         disjointness).
@@ -1006,6 +1258,7 @@ or callable, default "gmm"
         "merge_fragments": ["boolean"],
         "ignore_nuisance_dims": ["boolean"],
         "merge_same_dynamics": ["boolean"],
+        "align_entries": ["boolean"],
         "confidence": [Interval(Real, 0, 1, closed="neither")],
         "covariance_type": [StrOptions({"diag", "tied", "spherical", "full"})],
         "reg_covar": [_POSITIVE],
@@ -1017,7 +1270,7 @@ or callable, default "gmm"
 
     def __init__(
         self,
-        indicator: str | Indicator = "gmm",
+        indicator: str | Indicator = "auto",
         window: int | None = None,
         n_indicator_components: int = 5,
         max_indicator_samples: int = 20_000,
@@ -1031,6 +1284,7 @@ or callable, default "gmm"
         merge_fragments: bool = True,
         ignore_nuisance_dims: bool = True,
         merge_same_dynamics: bool = False,
+        align_entries: bool = True,
         confidence: float = 0.95,
         covariance_type: str = "diag",
         reg_covar: float = 1e-4,
@@ -1053,6 +1307,7 @@ or callable, default "gmm"
         self.merge_fragments = merge_fragments
         self.ignore_nuisance_dims = ignore_nuisance_dims
         self.merge_same_dynamics = merge_same_dynamics
+        self.align_entries = align_entries
         self.confidence = confidence
         self.covariance_type = covariance_type
         self.reg_covar = reg_covar
@@ -1213,9 +1468,85 @@ or callable, default "gmm"
         self.region_transitions_ = [members[i] for i in kept]
         if self.merge_same_dynamics:
             self._merge_same_dynamics(x)
+        if self.align_entries:
+            self._align_entries(x, reg, threshold)
         self.segments_, self.switches_ = self._segmentation(x, self.regions_)
         self._check_complete(self.segments_, x)
         return self
+
+    def _align_entries(self, x: list[np.ndarray], reg: np.ndarray, threshold: float) -> None:
+        """Build each transition region where entering it online matches the transitions.
+
+        The agent (and ``segments_``) enters a segment at the first state inside the next
+        region, but a demonstration that creeps into a transition (slowing down towards it,
+        under noise) is inside the region built from its transition states several steps
+        before it: the online segmentation switches early. In turn for each transition region,
+        the region as it is and the region rebuilt from the demonstrations' states ``1 ..
+        window`` steps (at the common rate of ``normalize_time``) after their own transitions
+        are tried, and the one kept is the one with which most demonstrations reach every
+        region in order, then the one whose entries lie closest to those transitions (median;
+        the earliest offset on a tie). So no demonstration that reached every region misses
+        one after.
+        """
+        lengths = [len(s) for s in x]
+        pooled = np.concatenate(x)
+        steps = np.concatenate([np.arange(n) for n in lengths])
+        cuts = np.cumsum(lengths)[:-1]
+
+        def distances(region: Region) -> np.ndarray:
+            d2 = region.mahalanobis2(pooled)
+            if region.time_bounds is not None:
+                lo, hi = region.time_bounds
+                d2 = np.where((steps >= lo) & (steps <= hi), d2, np.inf)
+            return d2
+
+        def reached(candidate: list[Region], d2: list[np.ndarray]) -> list[np.ndarray]:
+            """``_segmentation``'s segments, from the distances (searching only)."""
+            inside = [
+                np.split(d <= r.threshold, cuts)
+                for r, d in zip(_make_disjoint(candidate), d2, strict=True)
+            ]
+            out = []
+            for demo in range(len(x)):
+                found = np.full(len(candidate), -1, dtype=np.int64)
+                t = -1
+                for i, mask in enumerate(inside):
+                    later = np.flatnonzero(mask[demo][t + 1 :])
+                    if not later.size:
+                        break
+                    t += 1 + int(later[0])
+                    found[i] = t
+                out.append(found)
+            return out
+
+        regions = list(self.regions_)
+        d2 = [distances(r) for r in regions]
+        for k in range(len(regions) - (1 if self.include_goal else 0)):
+            members = self.region_transitions_[k]
+            times = np.array([step for _, step in members], dtype=np.float64)
+            best: tuple[tuple[int, float], Region, np.ndarray] | None = None
+            for offset in range(self._window + 1):
+                if offset:
+                    points = np.array(
+                        [
+                            x[d][min(step + round(offset / self.time_scale_[d]), len(x[d]) - 2)]
+                            for d, step in members
+                        ]
+                    )
+                    region = self._region(points, reg, threshold, times)
+                    mine = distances(region)
+                else:  # as it is (shrunk to be disjoint from the others)
+                    region, mine = regions[k], d2[k]
+                segments = reached(
+                    [*regions[:k], region, *regions[k + 1 :]], [*d2[:k], mine, *d2[k + 1 :]]
+                )
+                errors = [abs(segments[d][k] - step) for d, step in members if segments[d][k] > 0]
+                key = (-_n_complete(segments), float(np.median(errors)) if errors else math.inf)
+                if best is None or key < best[0]:
+                    best = (key, region, mine)
+            assert best is not None
+            _, regions[k], d2[k] = best
+        self.regions_ = _make_disjoint(regions)
 
     def _merge_same_dynamics(self, x: list[np.ndarray]) -> None:
         """Drop transition regions (greedily) whose removal does not raise the dynamics error."""
@@ -1305,7 +1636,7 @@ or callable, default "gmm"
             )
         else:
             other = (
-                "try another indicator (indicator='auto' tries gmm, velocity and linear; "
+                f"try another indicator (indicator='auto' tries {', '.join(_AUTO_CANDIDATES)}; "
                 "'ruptures' needs the ruptures package)"
             )
         merge = "" if self.merge_fragments else ", merge_fragments=True"
@@ -1535,6 +1866,14 @@ or callable, default "gmm"
             return velocity_indicator(x, seed, window=self._window)
         if name == "linear":
             return linear_indicator(x, seed, window=self.window)
+        if name == "phases":
+            return phases_indicator(
+                x,
+                seed,
+                min_size=self._window,
+                ignore_nuisance_dims=self.ignore_nuisance_dims,
+                max_samples=self.max_indicator_samples,
+            )
         return ruptures_indicator(x, seed, min_size=self._window)
 
     def _indicate(self, x: list[np.ndarray], seed: int) -> list[np.ndarray]:

@@ -23,7 +23,7 @@ def test_demos_fit_show_round_trip(tmp_path, capsys):
     task = TaskModel.from_json(task_path)
     assert task.n_segments >= 2
     assert f"SWIRL proxy task: {task.n_segments} segments" in capsys.readouterr().out
-    assert task.metadata["indicator"] == "gmm"
+    assert task.metadata["indicator"] in task.metadata["indicator_scores"]  # auto's choice
 
     figs = tmp_path / "figs"
     assert main(["show", str(task_path), "--plot", str(figs), "--demos", str(demos_path)]) == 0
@@ -69,9 +69,10 @@ def test_fit_flags_turn_off_nuisance_dims_and_merging(tmp_path, capsys):
     path = tmp_path / "demos.npz"
     save_demos(demos, path)
     segments = {}
+    gmm = ("--indicator", "gmm", "--no-align-entries")  # the paper's path, as measured there
     for flags in ((), ("--cluster-all-dims",), ("--cluster-all-dims", "--no-merge-fragments")):
         task_path = tmp_path / f"task{len(flags)}.json"
-        assert main(["fit", str(path), "-o", str(task_path), *flags]) == 0
+        assert main(["fit", str(path), "-o", str(task_path), *gmm, *flags]) == 0
         task = TaskModel.from_json(task_path)
         params = task.metadata["segmentation"]["params"]
         assert params["ignore_nuisance_dims"] is not bool(flags)
@@ -98,9 +99,11 @@ def test_fit_merge_same_dynamics_flag_drops_cuts_within_a_phase(tmp_path, capsys
     segments = []
     for flags in ((), ("--merge-same-dynamics",)):
         task_path = tmp_path / f"task{len(flags)}.json"
-        assert main(["fit", str(path), "-o", str(task_path), *flags]) == 0
+        gmm = ("--indicator", "gmm", "--no-align-entries")
+        assert main(["fit", str(path), "-o", str(task_path), *gmm, *flags]) == 0
         task = TaskModel.from_json(task_path)
         assert task.metadata["segmentation"]["params"]["merge_same_dynamics"] is bool(flags)
+        assert task.metadata["segmentation"]["params"]["align_entries"] is False
         segments.append(task.n_segments)
         said = " ".join(capsys.readouterr().err.split())  # rich wraps lines
         assert ("follow the same locally linear dynamics" in said) is bool(flags)
@@ -319,10 +322,10 @@ def test_fit_auto_prints_which_indicator_it_kept(tmp_path, capsys):
 
     path, task_path = tmp_path / "demos.npz", tmp_path / "task.json"
     save_demos(make_piecewise_linear_demos(n_demos=6, random_state=0)[0], path)
-    assert main(["fit", str(path), "-o", str(task_path), "--indicator", "auto"]) == 0
+    assert main(["fit", str(path), "-o", str(task_path)]) == 0  # auto, the default
     task = TaskModel.from_json(task_path)
     chosen, scores = task.metadata["indicator"], task.metadata["indicator_scores"]
-    assert list(scores) == ["gmm", "velocity", "linear"]
+    assert list(scores) == ["gmm", "velocity", "linear", "phases"]
     assert chosen == min(scores, key=scores.__getitem__)
     assert f"indicator: {chosen} (dynamics error" in capsys.readouterr().err
 
@@ -352,7 +355,8 @@ def test_fit_prints_why_it_dropped_a_region(tmp_path, capsys):
     assert len(warned) == 1 and "none from demos [5]" in warned[0]
     # worded in the command's flags, not in the Python arguments
     assert "--min-demo-fraction 1.0 needs 6 of 6 demos" in warned[0]
-    assert "--indicator auto tries" in warned[0] and "min_demo_fraction" not in warned[0]
+    assert "try --indicator ruptures" in warned[0] and "min_demo_fraction" not in warned[0]
+    assert "'auto' tried gmm, velocity, linear, phases" in warned[0]
 
 
 def test_reproduce_refuses_unknown_names_and_bad_seeds(capsys):

@@ -78,16 +78,22 @@ def test_an_absurd_value_is_an_error_naming_demo_step_and_dimension(parking_stat
         fit_task(corrupted, reg_covar=0.1, random_state=0)
 
 
+# the paper's GMM path, as parking's entry fits (the default "auto" is tried on mixed rates in
+# test_datasets.py; here it keeps 4 segments with one of the three coarse demos, 5 and 3 with
+# the others: it chose "phases" for the first)
+GMM = {"indicator": "gmm", "align_entries": False}
+
+
 def test_a_demo_at_another_rate_keeps_the_segments_with_time_normalised(parking_states):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        clean = fit_task(parking_states, reg_covar=0.1, random_state=0).n_segments
+        clean = fit_task(parking_states, reg_covar=0.1, random_state=0, **GMM).n_segments
     assert clean == 4
     same = 0
     for k in (0, 2, 4):  # one demo 7x coarser
         coarse = [*parking_states[:k], parking_states[k][::7], *parking_states[k + 1 :]]
         with pytest.warns(DemoWarning, match=f"demo {k}"):
-            n = fit_task(coarse, reg_covar=0.1, random_state=0).n_segments
+            n = fit_task(coarse, reg_covar=0.1, random_state=0, **GMM).n_segments
         assert n >= clean - 1
         same += n == clean
     assert same >= 2
@@ -100,13 +106,19 @@ def test_the_fit_says_which_regions_it_dropped_and_which_demos_lack_them(parking
         pytest.warns(SegmentationWarning, match=r"Dropped 3 .*none from demos \[4\]") as record,
     ):
         # step by step, the coarse demo hides every transition the others share
-        task = fit_task(coarse, reg_covar=0.1, normalize_time=False, random_state=0)
+        task = fit_task(coarse, reg_covar=0.1, normalize_time=False, random_state=0, **GMM)
     message = next(str(w.message) for w in record if w.category is SegmentationWarning)
     assert message.startswith("No transition region: the indicator proposed")
     assert "one segment to the goal" in message and task.n_segments == 1
     assert "min_demo_fraction=1.0 needs 5 of 5 demos" in message
     dropped = task.metadata["dropped_regions"]
     assert len(dropped) == 3 and all(d["demos"] == [4] for d in dropped)
+    # the defaults keep 2 segments there, and name the demo for the region they drop
+    with (
+        pytest.warns(DemoWarning, match="demo 4"),
+        pytest.warns(SegmentationWarning, match=r"Dropped 1 .*none from demos \[4\]"),
+    ):
+        assert fit_task(coarse, reg_covar=0.1, normalize_time=False, random_state=0).n_segments == 2
 
 
 def test_a_fit_without_candidates_says_so():

@@ -277,6 +277,7 @@ def test_demos_that_start_at_the_goal_fit_one_segment_with_a_warning():
             states.append(obs)
             done = terminated or truncated
         demos.append(Demonstration(np.array(states), np.array(actions)))
+    # the GMM keeps only the goal here (the default, "auto", keeps velocity's 2 segments)
     with pytest.warns(SegmentationWarning, match=r"Demos \[9\] start inside the goal region"):
-        task = fit_task(demos, random_state=0)
+        task = fit_task(demos, indicator="gmm", random_state=0)
     assert task.n_segments == 1 and len(demos[9].observations) == 501

@@ -396,7 +396,7 @@ def test_auto_keeps_the_indicator_that_explains_the_dynamics_best(kind):
     demos, _ = make_switching_demos(kind, n_demos=8, random_state=11)
     auto = TransitionStateClustering(indicator="auto", random_state=0).fit(demos)
     scores = auto.indicator_scores_
-    assert list(scores) == ["gmm", "velocity", "linear"]
+    assert list(scores) == ["gmm", "velocity", "linear", "phases"]
     assert auto.indicator_ == min(scores, key=scores.__getitem__)
     alone = TransitionStateClustering(indicator=auto.indicator_, random_state=0).fit(demos)
     assert alone.indicator_scores_ == {auto.indicator_: scores[auto.indicator_]}
@@ -414,11 +414,12 @@ def test_auto_warns_once_and_says_what_it_tried():
     with pytest.warns(SegmentationWarning) as record:
         tsc = TransitionStateClustering(indicator="auto", random_state=0).fit(demos)
     messages = [str(w.message) for w in record if w.category is SegmentationWarning]
-    assert len(messages) == 1 and "'auto' tried gmm, velocity, linear" in messages[0]
+    assert len(messages) == 1 and "'auto' tried gmm, velocity, linear, phases" in messages[0]
     assert len(tsc.regions_) == 1
     # without a goal region nothing is left: the error gives each indicator's reason
     shifted = [line + 0.1 * i for i in range(4)]
-    with pytest.raises(ValueError, match=r"indicator='auto'.*gmm, velocity, linear: no trans"):
+    tried = r"indicator='auto'.*gmm, velocity, linear, phases: no trans"
+    with pytest.raises(ValueError, match=tried):
         TransitionStateClustering(indicator="auto", include_goal=False, random_state=0).fit(shifted)
 
 
@@ -452,6 +453,8 @@ def _nuisance_sets(kinds):
 
 
 def _fit_and_score(demos, switches, **params):
+    """The paper's GMM path (the mechanisms below were measured on it), with ``params``."""
+    params = {"indicator": "gmm", "align_entries": False, **params}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SegmentationWarning)
         tsc = TransitionStateClustering(random_state=0, **params).fit(demos)
@@ -576,3 +579,72 @@ def test_far_from_the_origin_and_scale_apart_dims_segment_as_the_plain_demos():
     ):
         found = TransitionStateClustering(random_state=0).fit(changed).switches_
         assert all(np.array_equal(a, b) for a, b in zip(found, plain, strict=True))
+
+
+def test_phases_indicator_cuts_every_demo_into_the_shared_phases():
+    from sb3_swirl.segmentation import phases_indicator
+
+    demos, switches = make_switching_demos("one_dimension", random_state=0)
+    found = phases_indicator([d.observations for d in demos])
+    # one phase per speed of dimension 0, in every demo: two cuts each, within a step of the
+    # truth (a switch falls between two samples)
+    for f, s in zip(found, switches, strict=True):
+        assert len(f) == 2 and np.abs(f - s).max() <= 1
+    # in the fit, on demos it has not been tuned on (piecewise linear, 2-D)
+    demos, switches = make_piecewise_linear_demos(n_demos=10, noise=0.1, random_state=7)
+    tsc = TransitionStateClustering(indicator="phases", random_state=0).fit(demos)
+    assert switch_scores(tsc.switches_, switches, [len(d) for d in demos])["f1"] >= 0.9
+    # too short for two phases of min_size steps: no candidate, not an error
+    assert [f.size for f in phases_indicator([np.zeros((3, 2)), np.ones((4, 2))])] == [0, 0]
+
+
+def test_phases_indicator_fits_on_a_seeded_sample_of_large_demo_sets():
+    from sb3_swirl.segmentation import phases_indicator
+
+    demos, _ = make_piecewise_linear_demos(n_demos=30, noise=0.1, random_state=1)
+    states = [d.observations for d in demos]
+
+    def run(seed, max_samples):
+        return phases_indicator(states, seed, max_samples=max_samples)
+
+    def same(a, b):
+        return all(np.array_equal(u, v) for u, v in zip(a, b, strict=True))
+
+    assert same(run(0, 300), run(0, 300))  # the same demos drawn
+    assert not same(run(0, 300), run(1, 300))  # others, and other cuts
+    assert same(run(0, 10**6), run(1, 10**6))  # all of them: the seed is not used
+    # every demo is cut, those the models were not fitted on too
+    assert all(f.size >= 2 for f in run(0, 300))
+
+
+def test_aligned_entries_follow_a_noisy_slow_approach_to_its_switch():
+    # goal reaching under 5x the noise: a demo creeps into each transition, so the region of
+    # its transition states is entered several steps early (docs/segmentation.md)
+    lags = {False: [], True: []}
+    for seed in (0, 1, 2):
+        demos, switches = make_switching_demos("goal_reaching", noise=0.5, random_state=seed)
+        for align in (False, True):
+            tsc = TransitionStateClustering(
+                indicator="phases", align_entries=align, random_state=0
+            ).fit(demos)
+            assert len(tsc.regions_) == 3
+            lags[align] += [f - s for f, s in zip(tsc.switches_, switches, strict=True)]
+    early = {a: float(np.median(np.concatenate(v))) for a, v in lags.items()}
+    # measured: a median 6.5 steps early unaligned, 0 aligned (the tolerance is 4-5 steps)
+    assert early[False] <= -4 and abs(early[True]) <= 1.5
+
+
+def test_aligned_entries_never_lose_a_demo_and_keep_the_paper_regions_when_off(three_phases):
+    demos, _ = three_phases
+    off = TransitionStateClustering(align_entries=False, random_state=0).fit(demos)
+    for region, members in zip(off.regions_, off.region_transitions_, strict=False):
+        if members:  # a transition region: the mean of its demos' transition states
+            states = np.array([demos[d].observations[step] for d, step in members])
+            np.testing.assert_allclose(region.mean, states.mean(axis=0))
+    for kind in KINDS:
+        demos, _ = make_switching_demos(kind, n_demos=6, dim=3, noise=0.3, random_state=5)
+        complete = []
+        for align in (False, True):
+            tsc = TransitionStateClustering(align_entries=align, random_state=0).fit(demos)
+            complete.append(sum(bool((b > 0).all()) for b in tsc.segments_))
+        assert complete[1] >= complete[0]
