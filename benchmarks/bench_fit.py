@@ -33,7 +33,9 @@ def _demos(n_demos: int, steps: int, seed: int):
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="small sizes, a smoke run")
-    parser.add_argument("--indicator", default="gmm", choices=["gmm", "auto", "velocity", "linear"])
+    parser.add_argument(
+        "--indicator", default="auto", choices=["auto", "gmm", "velocity", "linear", "phases"]
+    )
     parser.add_argument("--kernel", action="store_true", help="approximate RBF kernel PCA")
     args = parser.parse_args(argv)
     kernel = {"kernel": "rbf", "kernel_sigma": 10.0} if args.kernel else {}
