@@ -97,6 +97,18 @@ def test_shipped_configs_cover_every_registered_task(algo):
             assert spec["reward_config"]["gamma"] == entries[env_id]["gamma"]
 
 
+def test_every_shipped_entry_names_the_segmentation_its_agent_was_tuned_with():
+    """fit_task's defaults may change (they did: auto, aligned entries); an entry that left the
+    indicator or the regions' construction to them would change its tuned agent silently."""
+    from sb3_swirl.experiments import _swirl_spec
+
+    entries = yaml.safe_load(zoo.shipped_config("swirl_dqn").read_text())
+    fitted = {env_id: _swirl_spec(entry).get("fit") for env_id, entry in entries.items()}
+    assert "default" in fitted and len(fitted) > 5
+    for env_id, fit in fitted.items():
+        assert fit["indicator"] in ("gmm", "velocity") and fit["align_entries"] is False, env_id
+
+
 def test_train_enjoy_tensorboard_and_plots_swirl_dqn_and_dqn(tmp_path, zoo_cli):
     """The zoo's log folders (config, model, task), true-reward evaluations, swirl/ keys in
     TensorBoard, enjoy with the segment shown, and rl_zoo3's plots of both algorithms."""
