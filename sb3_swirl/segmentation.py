@@ -46,7 +46,7 @@ from threadpoolctl import threadpool_limits
 
 from sb3_swirl.demos import as_demonstrations, check_demos_agree, check_window
 from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
-from swirl_wrappers._validation import check_option
+from swirl_wrappers._validation import check_int, check_option, check_real
 
 Indicator = Callable[[list[np.ndarray], Any], list[np.ndarray]]
 
@@ -555,7 +555,9 @@ class _PhaseData:
             np.int64
         )
 
-    def split_one(self, labels: np.ndarray, n_phases: int, min_size: int, penalty: np.ndarray):
+    def split_one(
+        self, labels: np.ndarray, n_phases: int, min_size: int, penalty: np.ndarray
+    ) -> np.ndarray:
         """``n_phases + 1`` phases from ``n_phases``: each phase in turn halved in every
         demonstration (then one refit and cut); the split that explains the steps best."""
         best: tuple[np.ndarray, float] | None = None
@@ -657,6 +659,16 @@ def phases_indicator(
     >>> tsc.switches_[0].tolist()
     [46, 89]
     """
+    max_phases, min_size, max_samples = (
+        check_int(name, value, low=1)
+        for name, value in (
+            ("max_phases", max_phases),
+            ("min_size", min_size),
+            ("max_samples", max_samples),
+        )
+    )
+    ridge = check_real("ridge", ridge, low=0.0, low_open=True)
+    tolerance = check_real("tolerance", tolerance, low=0.0)
     rs = check_random_state(random_state)
     if ignore_nuisance_dims and len(states) > 1:
         shared = _shared_course_dims(states)

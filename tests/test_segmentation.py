@@ -596,6 +596,10 @@ def test_phases_indicator_cuts_every_demo_into_the_shared_phases():
     assert switch_scores(tsc.switches_, switches, [len(d) for d in demos])["f1"] >= 0.9
     # too short for two phases of min_size steps: no candidate, not an error
     assert [f.size for f in phases_indicator([np.zeros((3, 2)), np.ones((4, 2))])] == [0, 0]
+    states = [d.observations for d in demos]
+    for name, value in (("min_size", 0), ("max_phases", 1.5), ("ridge", 0.0), ("tolerance", -1)):
+        with pytest.raises(ValueError, match=name):
+            phases_indicator(states, **{name: value})
 
 
 def test_phases_indicator_fits_on_a_seeded_sample_of_large_demo_sets():
