@@ -472,31 +472,38 @@ def ruptures_indicator(
     return out
 
 
-def _phase_dp(cost: np.ndarray, min_size: int) -> tuple[np.ndarray, float]:
-    """Cut one demonstration into the phases ``0 .. K-1`` in order, at the least total cost.
+def _phase_dp(cost: np.ndarray, lengths: np.ndarray, min_size: int) -> tuple[list, np.ndarray]:
+    """Cut demonstrations into the phases ``0 .. K-1`` in order, each at its least total cost.
 
-    ``cost[t, k]`` is the cost of transition ``t`` in phase ``k``; every phase holds at least
-    ``min_size`` transitions (the caller checks ``len(cost) >= K * min_size``). Dynamic
-    programming with running minima: O(K T).
+    ``cost[d, t, k]`` is the cost of transition ``t`` of demonstration ``d`` in phase ``k``
+    (demonstration ``d`` holds ``lengths[d]`` transitions; the rest is padding); every phase
+    holds at least ``min_size`` transitions (the caller checks ``lengths >= K * min_size``).
+    Dynamic programming with running minima, all demonstrations at once: O(K T) each.
     """
-    n, n_phases = cost.shape
-    prefix = np.vstack([np.zeros((1, n_phases)), np.cumsum(cost, axis=0)])
-    best = np.full((n_phases, n + 1), np.inf)  # best[k, t]: transitions < t in phases 0 .. k
-    start = np.zeros((n_phases, n + 1), dtype=np.int64)  # where phase k then starts
-    best[0, min_size:] = prefix[min_size:, 0]
+    n_demos, n, n_phases = cost.shape
+    prefix = np.zeros((n_demos, n + 1, n_phases))
+    np.cumsum(cost, axis=1, out=prefix[:, 1:])
+    # best[:, k, t]: transitions < t in phases 0 .. k; start: where phase k then starts
+    best = np.full((n_demos, n_phases, n + 1), np.inf)
+    start = np.zeros((n_demos, n_phases, n + 1), dtype=np.int64)
+    best[:, 0, min_size:] = prefix[:, min_size:, 0]
     steps = np.arange(n + 1 - min_size)
     for k in range(1, n_phases):
-        before = best[k - 1, : n + 1 - min_size] - prefix[: n + 1 - min_size, k]
-        running = np.minimum.accumulate(before)
-        start[k, min_size:] = np.maximum.accumulate(np.where(before <= running, steps, 0))
-        best[k, min_size:] = running + prefix[min_size:, k]
-    labels = np.empty(n, dtype=np.int64)
-    end = n
-    for k in range(n_phases - 1, -1, -1):
-        begin = int(start[k, end]) if k else 0
-        labels[begin:end] = k
-        end = begin
-    return labels, float(best[-1, n])
+        before = best[:, k - 1, : n + 1 - min_size] - prefix[:, : n + 1 - min_size, k]
+        running = np.minimum.accumulate(before, axis=1)
+        start[:, k, min_size:] = np.maximum.accumulate(
+            np.where(before <= running, steps, 0), axis=1
+        )
+        best[:, k, min_size:] = running + prefix[:, min_size:, k]
+    labels = []
+    for d, end in enumerate(lengths):
+        lab = np.empty(end, dtype=np.int64)
+        for k in range(n_phases - 1, -1, -1):
+            begin = int(start[d, k, end]) if k else 0
+            lab[begin:end] = k
+            end = begin
+        labels.append(lab)
+    return labels, best[np.arange(n_demos), -1, lengths]
 
 
 class _PhaseData:
@@ -509,27 +516,51 @@ class _PhaseData:
         )
         self.steps = np.concatenate([np.diff(x, axis=0) for x in states])
         self.bounds = np.cumsum([0] + [len(x) - 1 for x in states])
+        self.owner = np.repeat(np.arange(len(states)), np.diff(self.bounds))
+        self._products: np.ndarray | None = None
 
     def split(self, values: np.ndarray) -> list[np.ndarray]:
         return [values[a:b] for a, b in zip(self.bounds[:-1], self.bounds[1:], strict=True)]
 
+    def _sums(self, keys: np.ndarray, n_keys: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per key, ``z^T z`` and ``z^T y`` over the rows with that key: sums over the runs of
+        equal keys (a phase is one run in each demonstration), then over the runs."""
+        if self._products is None:  # z z^T and z y^T of every row, flattened side by side
+            z, y = self.feats, self.steps
+            self._products = np.concatenate(
+                [
+                    (z[:, :, None] * z[:, None, :]).reshape(len(z), -1),
+                    (z[:, :, None] * y[:, None, :]).reshape(len(z), -1),
+                ],
+                axis=1,
+            )
+        runs = np.r_[0, np.flatnonzero(np.diff(keys)) + 1]
+        sums = np.zeros((n_keys, self._products.shape[1]))
+        np.add.at(sums, keys[runs], np.add.reduceat(self._products, runs, axis=0))
+        p1, p = self.feats.shape[1], self.steps.shape[1]
+        return sums[:, : p1 * p1].reshape(-1, p1, p1), sums[:, p1 * p1 :].reshape(-1, p1, p)
+
     def models(self, labels: np.ndarray, n_phases: int, penalty: np.ndarray) -> np.ndarray:
         """Ridge fit of one affine model per phase, shape (K, p + 1, p)."""
-        out = np.empty((n_phases, self.feats.shape[1], self.steps.shape[1]))
-        for k in range(n_phases):
-            z, y = self.feats[labels == k], self.steps[labels == k]
-            out[k] = np.linalg.solve(z.T @ z + penalty, z.T @ y)
-        return out
+        gram, cross = self._sums(labels, n_phases)
+        return np.linalg.solve(gram + penalty, cross)
 
     def assign(self, models: np.ndarray, min_size: int) -> tuple[np.ndarray, float]:
         """Each demonstration's best cut into the phases in order, and the total cost."""
         residual = np.matmul(self.feats, models) - self.steps
         cost = np.einsum("knp,knp->nk", residual, residual)
+        lengths = np.diff(self.bounds)
         labels, total = [], 0.0
-        for part in self.split(cost):
-            lab, c = _phase_dp(part, min_size)
-            labels.append(lab)
-            total += c
+        # demonstrations padded to the longest of a batch, batches of about 2^18 transitions
+        batch = max(1, (1 << 18) // (int(lengths.max()) * cost.shape[1]))
+        for first in range(0, len(lengths), batch):
+            sizes = lengths[first : first + batch]
+            padded = np.zeros((len(sizes), int(sizes.max()), cost.shape[1]))
+            for d, part in enumerate(self.split(cost)[first : first + batch]):
+                padded[d, : len(part)] = part
+            lab, costs = _phase_dp(padded, sizes, min_size)
+            labels += lab
+            total += float(costs.sum())
         return np.concatenate(labels), total
 
     def refine(
@@ -577,18 +608,13 @@ class _PhaseData:
 
     def cv_error(self, labels: np.ndarray, n_phases: int, penalty: np.ndarray) -> float:
         """Mean squared error of each demo's steps under models fitted on the other demos."""
-        n_demos, p1 = len(self.bounds) - 1, self.feats.shape[1]
-        gram = np.zeros((n_demos, n_phases, p1, p1))
-        cross = np.zeros((n_demos, n_phases, p1, self.steps.shape[1]))
-        for d, (a, b) in enumerate(zip(self.bounds[:-1], self.bounds[1:], strict=True)):
-            for k in np.unique(labels[a:b]):  # phases are contiguous, but a mask is simplest
-                rows = np.flatnonzero(labels[a:b] == k) + a
-                z = self.feats[rows]
-                gram[d, k] = z.T @ z
-                cross[d, k] = z.T @ self.steps[rows]
+        n_demos = len(self.bounds) - 1
+        gram, cross = self._sums(self.owner * n_phases + labels, n_demos * n_phases)
+        gram = gram.reshape(n_demos, n_phases, *gram.shape[1:])
+        cross = cross.reshape(n_demos, n_phases, *cross.shape[1:])
         models = np.linalg.solve(gram.sum(0) - gram + penalty, cross.sum(0) - cross)
-        owner = np.repeat(np.arange(n_demos), np.diff(self.bounds))
-        residual = np.matmul(self.feats[:, None, :], models[owner, labels])[:, 0] - self.steps
+        z = self.feats[:, None, :]
+        residual = np.matmul(z, models[self.owner, labels])[:, 0] - self.steps
         return float((residual**2).sum() / len(self.steps))
 
 
