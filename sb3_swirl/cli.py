@@ -163,6 +163,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         console.print(
             f"indicator: {task.metadata['indicator']} (dynamics error, lower is better: {tried})"
         )
+        for name, why in task.metadata.get("indicator_failures", {}).items():
+            console.print(f"  {name} failed: {why}", markup=False)
     _print_task(task)
     return 0
 
@@ -335,7 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         help="window length of the indicator (default 3 for gmm and velocity; linear: "
-        "max(2 (dims + 1), 8))",
+        "max(2 (dims + 1), 8); phases and ruptures: the fewest steps of a phase)",
     )
     p.add_argument(
         "--min-demo-fraction",

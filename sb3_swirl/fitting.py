@@ -260,6 +260,7 @@ def fit_task(
             name: error if np.isfinite(error) else None
             for name, error in segmenter.indicator_scores_.items()
         },
+        "indicator_failures": segmenter.indicator_failures_,
         "dropped_regions": segmenter.dropped_regions_,
         "cluster_dims": None
         if segmenter.cluster_dims_ is None

@@ -53,14 +53,22 @@ Indicator = Callable[[list[np.ndarray], Any], list[np.ndarray]]
 _CHUNK = 100_000  # rows per predict call: bounds peak memory on 1000 x 1000-step demo sets
 _SEED_MAX = np.iinfo(np.int32).max
 _DEFAULT_WINDOW = 3  # of the GMM and velocity indicators
+# A demo enters a segment far from its own transition into it when the gap is over this share
+# of its previous segment (and the benchmark's tolerance): on the benchmark's tuning sets, fits
+# with switch F1 >= 0.95 had median gaps of at most 0.06, those over 0.1 read F1 0.4-0.8
+# (docs/segmentation.md)
+_ENTRY_GAP = 0.1
 
 
 # ---------------------------------------------------------------------------- helpers
+def _constant_columns(x: np.ndarray) -> np.ndarray:
+    """Which columns of ``x`` are constant: no spread beyond rounding of their own values."""
+    return ~(x.std(axis=0) > 1e-12 * np.maximum(1.0, np.abs(x).max(axis=0, initial=0.0)))
+
+
 def _scale(x: np.ndarray) -> np.ndarray:
-    """Per-column standard deviation, with constant columns (no spread beyond rounding of
-    their own values) given scale 1."""
-    std = x.std(axis=0)
-    return np.where(std > 1e-12 * np.maximum(1.0, np.abs(x).max(axis=0, initial=0.0)), std, 1.0)
+    """Per-column standard deviation, with constant columns given scale 1."""
+    return np.where(_constant_columns(x), 1.0, x.std(axis=0))
 
 
 def _local_maxima(score: np.ndarray, threshold: float, radius: int) -> np.ndarray:
@@ -647,6 +655,7 @@ def phases_indicator(
     Parameters
     ----------
     states : list of arrays of shape (T_i + 1, p)
+        At least two demonstrations (the number of phases is chosen by leaving one out).
     random_state : int, RandomState or None
         Chooses the demonstrations the models are fitted on when they hold more than
         ``max_samples`` steps (all demonstrations are cut).
@@ -663,7 +672,8 @@ def phases_indicator(
         ``TransitionStateClustering(ignore_nuisance_dims=True)`` does; see
         ``_shared_course_dims``).
     max_samples : int
-        At most about this many steps (whole demonstrations, drawn at random) to fit on.
+        The models are fitted on whole demonstrations drawn at random until they hold more
+        than this many steps (at least two demonstrations; all when they hold fewer).
 
     Returns
     -------
@@ -696,7 +706,9 @@ def phases_indicator(
     ridge = check_real("ridge", ridge, low=0.0, low_open=True)
     tolerance = check_real("tolerance", tolerance, low=0.0)
     rs = check_random_state(random_state)
-    if ignore_nuisance_dims and len(states) > 1:
+    # two or more finite (T_i + 1, p) arrays, or an error naming the demonstration
+    states = [d.observations for d in as_demonstrations(states)]
+    if ignore_nuisance_dims:
         shared = _shared_course_dims(states)
         if shared is not None:
             states = [x[:, shared] for x in states]
@@ -1128,12 +1140,14 @@ by "+", or callable, default "auto"
     window : int, optional
         Window length of the indicators (``--window`` in the CLI). By default 3 for ``"gmm"``
         and ``"velocity"``; ``"linear"`` then uses its own default, ``max(2 (p + 1), 8)``
-        transitions per side (it fits ``p + 1`` coefficients on each). Every demonstration
-        needs ``window + 2`` states (at least 5 by default).
+        transitions per side (it fits ``p + 1`` coefficients on each); ``"phases"`` and
+        ``"ruptures"`` take it as the fewest steps of a phase (``min_size``). Every
+        demonstration needs ``window + 2`` states (at least 5 by default).
     n_indicator_components : int, default 5
         GMM components of the ``"gmm"`` indicator.
     max_indicator_samples : int, default 20000
         Windows (drawn at random) used to fit the indicator GMM; all windows are labelled.
+        For ``"phases"``, the steps its models are fitted on (``max_samples``).
     kernel : {None, "rbf"}, default None
         Featurise states with an approximate RBF kernel PCA before windowing.
     kernel_sigma : float, default 0.1
@@ -1168,7 +1182,8 @@ by "+", or callable, default "auto"
         follows a shared course (e.g. oscillations whose timing differs between
         demonstrations) nothing is ignored. Regions still span every dimension.
         That second fit is kept only if it ends with more regions. ``indicator="auto"`` also
-        scores its candidates without those dimensions. Chosen by
+        scores its candidates without those dimensions, and ``"phases"`` leaves them out of
+        its models. Chosen by
         ``benchmarks/bench_segmentation.py`` (README).
     merge_same_dynamics : bool, default False
         After pruning, drop each transition region (greedily, the best first) without which
@@ -1249,8 +1264,9 @@ by "+", or callable, default "auto"
         region is the end, not a switch): compare them with known phase changes using
         :func:`switch_scores`.
     region_transitions_ : list of list of (demo, step)
-        The representative transitions each transition region was built from (empty for the
-        goal region).
+        The representative transitions of each transition region (empty for the goal
+        region). With ``align_entries`` a region may be built from the states up to
+        ``window`` steps after them.
     dropped_regions_ : list of dict
         The candidate regions the fit dropped, each with its median transition ``"time"``,
         ``"centre"``, the ``"reason"`` and the ``"demos"`` concerned (those without a
@@ -1260,6 +1276,9 @@ by "+", or callable, default "auto"
     indicator_scores_ : dict of str to float
         :func:`dynamics_cv_error` of each indicator tried (``inf`` where its fit failed;
         ``"callable"`` for your own).
+    indicator_failures_ : dict of str to str
+        Why each indicator ``"auto"`` tried and that failed gave no segmentation (empty
+        otherwise).
     feature_map_ : RBFFeatures or None
         The kernel feature map when ``kernel="rbf"``.
     cluster_dims_ : int array or None
@@ -1381,7 +1400,9 @@ by "+", or callable, default "auto"
                 self.indicator_ = self.indicator
                 name = self.indicator if isinstance(self.indicator, str) else "callable"
                 self.indicator_scores_ = {name: self._dynamics_error(demos)}
+                self.indicator_failures_ = {}
         self._warn_lost()
+        self._warn_entries([len(d) for d in demos])
         return self
 
     def _fit_auto(self, demos: list) -> TransitionStateClustering:
@@ -1415,6 +1436,7 @@ by "+", or callable, default "auto"
                 setattr(self, key, value)
         self.indicator_ = best
         self.indicator_scores_ = scores
+        self.indicator_failures_ = failures
         for w in caught:  # e.g. a GMM that did not converge: the chosen fit's only
             warnings.warn(w.message, w.category, stacklevel=3)
         return self
@@ -1523,8 +1545,9 @@ by "+", or callable, default "auto"
         window`` steps (at the common rate of ``normalize_time``) after their own transitions
         are tried, and the one kept is the one with which most demonstrations reach every
         region in order, then the one whose entries lie closest to those transitions (median;
-        the earliest offset on a tie). So no demonstration that reached every region misses
-        one after.
+        the earliest offset on a tie). So the number of demonstrations that reach every region
+        never drops (which ones may change). A rebuilt region whose centre lies inside another
+        region, or that holds the other's centre, is not tried: it would mark that place.
         """
         lengths = [len(s) for s in x]
         pooled = np.concatenate(x)
@@ -1572,6 +1595,8 @@ by "+", or callable, default "auto"
                         ]
                     )
                     region = self._region(points, reg, threshold, times)
+                    if any(_overlaps(region, r) for j, r in enumerate(regions) if j != k):
+                        continue  # shifted onto another region's states: it marks that one
                     mine = distances(region)
                 else:  # as it is (shrunk to be disjoint from the others)
                     region, mine = regions[k], d2[k]
@@ -1598,7 +1623,7 @@ by "+", or callable, default "auto"
 
         current = error(regions)
         removable = len(regions) - (1 if self.include_goal else 0)
-        while removable > 0:
+        while removable > 0 and len(regions) > 1:  # the last region is never merged away
             best, k = min((error(regions[:k] + regions[k + 1 :]), k) for k in range(removable))
             if best > current:
                 break
@@ -1661,6 +1686,47 @@ by "+", or callable, default "auto"
                 kept.append(i)
         kept = self._prune_unreached(x, [regions[i] for i in kept], kept, times)
         return regions, members, kept, fragmented
+
+    def _warn_entries(self, lengths: list[int]) -> None:
+        """Warn when the segment index switches far from the demos' own transitions.
+
+        A region built from transitions at different places (a corner each demo turns at
+        another point) is entered at its edge: the online segmentation, and the agent's, then
+        switches before or after the demos' transitions. A demo is far from its transition
+        into a region when the gap exceeds both ``max(3, 3 %`` of its length``)`` steps (the
+        segmentation benchmark's tolerance) and ``_ENTRY_GAP`` of its segment that ends there;
+        warned when most of the region's demos are. Only with ``align_entries=True``: without
+        it the regions of Algorithm 1 are entered early by construction (the shipped tasks'
+        fit).
+        """
+        if not self.align_entries:
+            return
+        n_transition_regions = len(self.regions_) - (1 if self.include_goal else 0)
+        for k in range(n_transition_regions):
+            members = self.region_transitions_[k]
+            far: dict[int, int] = {}
+            for d, step in members:
+                entry, start = self.segments_[d][k], self.segments_[d][k - 1] if k else 0
+                gap = int(entry - step)
+                tolerance = max(3.0, 0.03 * lengths[d])
+                if entry > 0 and abs(gap) > tolerance and abs(gap) > _ENTRY_GAP * (step - start):
+                    far[d] = gap
+            if 2 * len(far) <= len(members):
+                continue
+            gap = float(np.median(list(far.values())))
+            warnings.warn(
+                f"Segment {k + 1} starts a median {abs(gap):.0f} steps "
+                f"{'before' if gap < 0 else 'after'} the demos' own transitions into it in "
+                f"demos {sorted(far)} of {sorted(d for d, _ in members)}: region {k} spans "
+                "transitions at different places, and a demo enters it at its edge. The "
+                "rewards and the agent's segment index follow these entries, not the "
+                "transitions. Look at `sb3-swirl show --plot` with the demos: where the demos "
+                "change phase at different states, a region of states cannot mark the change "
+                "(the paper's §5 assumes it can); dims= (the dimensions the task lives in) may "
+                "help",
+                SegmentationWarning,
+                stacklevel=3,
+            )
 
     def _warn_lost(self) -> None:
         """Warn when the fit found candidates but kept almost none of their structure."""
@@ -1768,6 +1834,15 @@ by "+", or callable, default "auto"
                     "offset to it) or the state with the goal (on a Dict env, state_key="
                     "['observation', 'desired_goal'])"
                 )
+            elif goal_only and at_goal and travel <= 0.25 * walked:
+                advice = (
+                    f"The demonstrations wander in place (a median {travel:.3g} from start to "
+                    f"end over a path of {walked:.3g}), so the goal region, fitted to where "
+                    "they end, holds their starts, and no transition was found that every "
+                    "demonstration shares: SWIRL needs demos that go from one place to another "
+                    "through shared phases. If they do, lower min_demo_fraction or change the "
+                    "indicator or window"
+                )
             else:
                 advice = (
                     "Do the demonstrations move? Otherwise lower min_demo_fraction or change "
@@ -1775,14 +1850,20 @@ by "+", or callable, default "auto"
                 )
             raise ValueError(
                 f"only {complete} of {len(segments)} demonstrations reach "
-                f"the {len(self.regions_)} regions in order, {need} needed ({shown}). {advice}"
+                + (
+                    "the region"
+                    if len(self.regions_) == 1
+                    else f"the {len(self.regions_)} regions in order"
+                )
+                + f", {need} needed ({shown}). {advice}"
             )
         if excused:
             warnings.warn(
                 f"Demos {excused} start inside the goal region (where the demos end), as in a "
                 "task of holding a state such as balancing: it marks no transition for them, "
                 "and an episode that starts there is complete from its first step. The task "
-                "has one segment; to find phases, try indicator='velocity' or 'auto'",
+                "has one segment; if the demos have phases, fit without those that start at the "
+                f"goal, or try another indicator ('auto' tries {', '.join(_AUTO_CANDIDATES)})",
                 SegmentationWarning,
                 stacklevel=4,
             )

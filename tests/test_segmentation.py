@@ -340,7 +340,9 @@ def test_linear_indicator_takes_the_window_and_otherwise_its_own_default(three_p
 def test_demonstrations_that_do_not_move_are_a_clear_error():
     rng = np.random.default_rng(0)
     still = [np.ones((20, 2)) + rng.normal(scale=1e-3, size=(20, 2)) for _ in range(4)]
-    with pytest.raises(ValueError, match=r"demo 0 (starts inside|never reaches).*move"):
+    with pytest.raises(
+        ValueError, match=r"demo 0 (starts inside|never reaches).*(move|wander in place)"
+    ):
         TransitionStateClustering(random_state=0).fit(still)
 
 
@@ -652,3 +654,83 @@ def test_aligned_entries_never_lose_a_demo_and_keep_the_paper_regions_when_off(t
             tsc = TransitionStateClustering(align_entries=align, random_state=0).fit(demos)
             complete.append(sum(bool((b > 0).all()) for b in tsc.segments_))
         assert complete[1] >= complete[0]
+
+
+def _two_demos(kind, seed, **kwargs):
+    """Two demos of two phases (the small cases reviews found)."""
+    return make_switching_demos(kind, n_demos=2, n_phases=2, random_state=seed, **kwargs)[0]
+
+
+def test_an_aligned_region_is_never_rebuilt_on_the_next_regions_states():
+    # two demos at mixed rates: shifted 3 steps, region 0's states were region 1's, the two
+    # shared a centre and shrinking them apart divided by zero (found by a review)
+    demos = _two_demos("one_dimension", 11, phase_length=15.0, noise=0.3, rates=(2, 3))
+    off = TransitionStateClustering(indicator="phases", align_entries=False, random_state=11)
+    on = TransitionStateClustering(indicator="phases", random_state=11)
+    assert len(on.fit(demos).regions_) == len(off.fit(demos).regions_) == 3
+    auto = TransitionStateClustering(random_state=11).fit(demos)
+    assert np.isfinite(auto.indicator_scores_["phases"])
+    demos = _two_demos("constant_velocity", 36, phase_length=8.0, noise=0.1, rates=(4, 4))
+    tsc = TransitionStateClustering(include_goal=False, random_state=36).fit(demos)
+    assert len(tsc.regions_) == 2
+
+
+def test_merging_same_dynamics_keeps_the_last_region_without_a_goal():
+    # without a goal region every region is removable; removing the last one raised an
+    # IndexError (found by a review)
+    demos = _two_demos(
+        "linear_dynamics", 94, phase_length=20.0, noise=0.5, speed_ratio=1.5, rates=(4, 2)
+    )
+    tsc = TransitionStateClustering(
+        indicator="gmm", include_goal=False, merge_same_dynamics=True, window=2, random_state=94
+    )
+    with pytest.warns(SegmentationWarning, match="The task has 1 segment"):
+        tsc.fit(demos)
+    assert len(tsc.regions_) == 1
+
+
+def test_phases_indicator_checks_its_demonstrations():
+    from sb3_swirl.segmentation import phases_indicator
+
+    demos, _ = make_switching_demos("goal_reaching", random_state=0)
+    states = [d.observations for d in demos]
+    with pytest.raises(ValueError, match="at least 2"):
+        phases_indicator(states[:1])  # leave-one-out needs another demo
+    bad = [s.copy() for s in states]
+    bad[2][5, 1] = np.nan
+    with pytest.raises(ValueError, match="demo 2"):
+        phases_indicator(bad)
+
+
+def test_demonstrations_that_wander_in_place_are_told_so():
+    rng = np.random.default_rng(2)
+    noise = [rng.standard_normal((100, 2)) for _ in range(5)]
+    with pytest.raises(ValueError, match="wander in place"):
+        TransitionStateClustering(random_state=0).fit(noise)
+
+
+def _corners(seed, jitter, legs=(100, 100, 80), noise=0.002, n_demos=10):
+    """Right, up, right at 0.1 a step; each leg's length varies by ``jitter`` between demos."""
+    rng = np.random.default_rng(seed)
+    demos = []
+    for _ in range(n_demos):
+        moves = [
+            np.tile(d, (int(n * (1 + jitter * rng.uniform(-1, 1))), 1))
+            for d, n in zip(([0.1, 0], [0, 0.1], [0.1, 0]), legs, strict=True)
+        ]
+        steps = np.concatenate(moves)
+        steps += noise * rng.standard_normal(steps.shape)
+        demos.append(np.vstack([np.zeros(2), np.cumsum(steps, axis=0)]))
+    return demos
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_entries_far_from_the_demos_transitions_are_warned_about(seed):
+    # corners at places 20% apart: one region of them all is entered at its edge, tens of
+    # steps before a demo's own corner (found by a user-level review: silent before)
+    with pytest.warns(SegmentationWarning, match="steps before the demos' own transitions"):
+        TransitionStateClustering(random_state=0).fit(_corners(seed, jitter=0.2))
+    with warnings.catch_warnings():  # the same corners at one place: no warning
+        warnings.simplefilter("error", SegmentationWarning)
+        tsc = TransitionStateClustering(random_state=0).fit(_corners(seed, jitter=0.0))
+    assert len(tsc.regions_) == 3
