@@ -25,6 +25,7 @@ from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.segmentation import (
     StrictParamsMixin,
     TransitionStateClustering,
+    _constant_columns,
     segment_boundaries,
 )
 from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
@@ -101,6 +102,21 @@ def _mean_cost(x: np.ndarray, target: np.ndarray, weight: np.ndarray) -> float:
     return float(np.mean(np.einsum("ij,jk,ik->i", diff, weight, diff)))
 
 
+def _constant_dims(pooled: np.ndarray) -> np.ndarray:
+    """The task-space dimensions no demonstration moves in, with a warning that the rewards
+    ignore them: the demos say nothing of how far off such a dimension may be (its inverse
+    variance would be a floor's, 1e12 times the others')."""
+    constant = _constant_columns(pooled)
+    if constant.any():
+        warnings.warn(
+            f"task-space dimensions {np.flatnonzero(constant).tolist()} are constant in every "
+            "demonstration: the rewards ignore them (pass dims= to leave them out of the task "
+            "space)",
+            stacklevel=3,
+        )
+    return constant
+
+
 def _inverse_covariance(x: np.ndarray, floor: np.ndarray) -> np.ndarray:
     """The symmetric inverse of the covariance of the rows of ``x`` plus ``floor``."""
     p = x.shape[1]
@@ -144,7 +160,8 @@ class QuadraticRewardLearner(StrictParamsMixin, RewardLearner):
     regularization : float, default 1e-3
         Added to the segment covariance before inversion, relative to the variance of all
         demonstration states along each axis (plus a tiny absolute floor), so segments with
-        few states or a constant coordinate still give a finite ``Psi``.
+        few states or a coordinate constant in the segment still give a finite ``Psi``. A
+        coordinate constant in every demonstration gets weight 0 (with a warning).
     normalize : bool, default True
         Scale each ``Psi_i`` so the mean reward over the demonstrations' states in segment
         ``i`` is ``-1``. Raw Mahalanobis rewards range over orders of magnitude between
@@ -205,12 +222,15 @@ class QuadraticRewardLearner(StrictParamsMixin, RewardLearner):
         pooled = np.concatenate([s for seg in segments for s in seg])
         p = pooled.shape[1]
         floor = self.regularization * np.diag(pooled.var(axis=0)) + 1e-12 * np.eye(p)
+        constant = _constant_dims(pooled) if self.metric == "mahalanobis" else np.zeros(p, bool)
         rewards, sizes = [], []
         for seg, region in zip(segments, regions, strict=True):
             # A segment no demonstration entered falls back on the statistics of all states.
             x = np.concatenate(seg) if seg else pooled
             sizes.append(sum(len(s) for s in seg))
             weight = np.eye(p) if self.metric == "euclidean" else _inverse_covariance(x, floor)
+            weight[constant] = 0.0
+            weight[:, constant] = 0.0
             if self.normalize:
                 mean_cost = _mean_cost(x, region.mean, weight)
                 if mean_cost > 1e-12:
@@ -425,6 +445,7 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
             )
         pooled = np.concatenate([s["x"] for s in segments if len(s["x"])])
         var = pooled.var(axis=0) + 1e-12
+        constant = _constant_dims(pooled)
         rewards, sizes, loglik, scales = [], [], [], []
         for seg, region in zip(segments, regions, strict=True):
             x = seg["x"] if len(seg["x"]) else pooled
@@ -435,6 +456,8 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
                 weight, ll = self._fit_discrete(seg, region.mean, n_actions, featurize, var)
             else:
                 weight, ll = self._fit_continuous(seg, region.mean, var)
+            weight[constant] = 0.0
+            weight[:, constant] = 0.0
             scale = _mean_cost(x, region.mean, weight) if self.normalize else 1.0
             scale = scale if scale > 1e-12 else 1.0
             rewards.append(QuadraticReward(target=region.mean, weight=weight / scale))

@@ -9,6 +9,7 @@ from sb3_swirl.demos import make_piecewise_linear_demos
 from sb3_swirl.fitting import fit_task
 from sb3_swirl.rewards import QuadraticRewardLearner, RewardLearner, segment_states
 from sb3_swirl.segmentation import TransitionStateClustering
+from swirl_wrappers import Region
 
 
 @pytest.fixture(scope="module")
@@ -99,3 +100,22 @@ def test_reward_learner_is_an_abstract_protocol():
     with pytest.raises(TypeError):
         RewardLearner()
     assert issubclass(QuadraticRewardLearner, RewardLearner)
+
+
+def test_a_dimension_no_demo_moves_in_is_ignored_with_a_warning(fitted):
+    demos, _ = fitted
+    plain = [d.observations for d in demos]
+    padded = [np.c_[x, np.full(len(x), 7.0)] for x in plain]
+    regions = TransitionStateClustering(random_state=0).fit(plain).regions_
+    # the same regions with the constant dimension (at its value): the same segments
+    lifted = [
+        Region(np.r_[r.mean, 7.0], np.pad(r.covariance, (0, 1)) + np.diag([0, 0, 1.0]), r.threshold)
+        for r in regions
+    ]
+    with pytest.warns(UserWarning, match=r"dimensions \[2\] are constant"):
+        learner = QuadraticRewardLearner().fit(padded, lifted)
+    reference = QuadraticRewardLearner().fit(plain, regions)
+    for mine, theirs in zip(learner.rewards_, reference.rewards_, strict=True):
+        # its inverse variance was the floor's, 1e12: off by 1e-4 online cost 1e4 times more
+        np.testing.assert_array_equal(mine.weight[2], 0.0)
+        np.testing.assert_allclose(mine.weight[:2, :2], theirs.weight, rtol=1e-9)
