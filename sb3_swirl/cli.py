@@ -165,6 +165,12 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         )
         for name, why in task.metadata.get("indicator_failures", {}).items():
             console.print(f"  {name} failed: {why}", markup=False)
+    switches = task.metadata["switches"]
+    shown = "; ".join(f"demo {d}: {s}" for d, s in enumerate(switches[:5]))
+    console.print(
+        f"steps at which each demo enters a new segment: {shown}"
+        + (f"; ... ({len(switches) - 5} more in the task's metadata)" if len(switches) > 5 else "")
+    )
     _print_task(task)
     return 0
 

@@ -266,6 +266,7 @@ def fit_task(
         if segmenter.cluster_dims_ is None
         else segmenter.cluster_dims_.tolist(),
         "transitions": [t.tolist() for t in segmenter.transitions_],
+        "switches": [t.tolist() for t in segmenter.switches_],
         "reward": _record(learner),
     }
     task = TaskModel(

@@ -22,7 +22,13 @@ def test_demos_fit_show_round_trip(tmp_path, capsys):
     assert main(["fit", str(demos_path), "-o", str(task_path), "--seed", "1"]) == 0
     task = TaskModel.from_json(task_path)
     assert task.n_segments >= 2
-    assert f"SWIRL proxy task: {task.n_segments} segments" in capsys.readouterr().out
+    printed = capsys.readouterr()
+    assert f"SWIRL proxy task: {task.n_segments} segments" in printed.out
+    # the switch steps, to check against transitions.png without Python
+    first = task.segment_indices(demos[0].observations)
+    steps = (np.flatnonzero(np.diff(first)) + 1)[: task.n_segments - 1].tolist()
+    assert task.metadata["switches"][0] == steps
+    assert f"demo 0: {steps}" in " ".join(printed.err.split())
     assert task.metadata["indicator"] in task.metadata["indicator_scores"]  # auto's choice
 
     figs = tmp_path / "figs"
