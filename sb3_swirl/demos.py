@@ -248,6 +248,12 @@ _RATE_FACTOR = 3.0
 # An entry farther from its dimension's median than this many times the dimension's spread is
 # a corrupted value, not data.
 _ABSURD_FACTOR = 1e6
+_RATE_WHY = (
+    "recorded at another sampling rate (or cut short where the others slow down)? The "
+    "segmentation resamples the demos to a common rate (normalize_time=True), which undoes "
+    "another sampling rate, not a demo cut short"
+)
+_LENGTH_WHY = "incomplete, or at another rate? An incomplete demo can hide or merge segments"
 
 
 def check_demos_fit_spaces(
@@ -354,24 +360,23 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
                 f"dimension over all demos ({spread[dim]:.3g} around {centre[dim]:.3g}): a "
                 "corrupted value? Fix or drop the demo"
             )
-    messages = []
+    found = []
     for n, (step, length) in enumerate(_rate_ratios(states, spread)):
         if _off(step, _RATE_FACTOR) and _off(length, 2.0) and (step > 1) != (length > 1):
             # steps and length off in opposite directions: the time axis is scaled
-            what, factor, why = (
-                "typical step",
-                step,
-                "recorded at another sampling rate (or cut short where the others slow down)",
-            )
+            found.append((n, "typical step", step, _RATE_WHY))
         elif _off(length, _RATE_FACTOR):
-            what, factor, why = "number of steps", length, "incomplete, or at another rate"
-        else:
-            continue
-        ratio = f"{factor:.2g} times" if factor > 1 else f"1/{1 / factor:.2g} of"
+            found.append((n, "number of steps", length, _LENGTH_WHY))
+    messages = []
+    if len(states) == 2 and len(found) == 2:  # two demos: which one is off cannot be told
+        n, what, factor, why = max(found, key=lambda f: f[2])
         messages.append(
-            f"demo {n}: its {what} is {ratio} the other demos' (median): {why}? The "
-            "segmentation compares the demos step by step"
+            f"demos 0 and 1: the {what} of demo {n} is {factor:.2g} times demo {1 - n}'s: one "
+            f"of them {why}"
         )
+    for n, what, factor, why in found if not messages else ():
+        ratio = f"{factor:.2g} times" if factor > 1 else f"1/{1 / factor:.2g} of"
+        messages.append(f"demo {n}: its {what} is {ratio} the other demos' (median): {why}")
     for message in messages:
         warnings.warn(message, DemoWarning, stacklevel=3)
     return messages

@@ -49,6 +49,14 @@ def test_a_demo_at_another_sampling_rate_is_named(parking_states, resample, said
     assert len(record) == 1  # only the odd demo
 
 
+def test_two_demos_at_different_rates_get_one_warning(parking_states):
+    # which of two is off cannot be told: one warning names both (each was blamed before)
+    demos = [parking_states[0], parking_states[1][::7]]
+    with pytest.warns(DemoWarning, match=r"demos 0 and 1: the typical step of demo 1") as record:
+        check_demos_agree(as_demonstrations(demos))
+    assert len(record) == 1
+
+
 def test_ordinary_demo_sets_raise_no_warning(parking_states):
     assert _agree(parking_states) == []
     for seed in (3, 4):  # ragged lengths, phases of different speeds, many dims and noise
