@@ -1836,12 +1836,14 @@ by "+", or callable, default "auto"
                 )
             elif goal_only and at_goal and travel <= 0.25 * walked:
                 advice = (
-                    f"The demonstrations wander in place (a median {travel:.3g} from start to "
-                    f"end over a path of {walked:.3g}), so the goal region, fitted to where "
-                    "they end, holds their starts, and no transition was found that every "
-                    "demonstration shares: SWIRL needs demos that go from one place to another "
-                    "through shared phases. If they do, lower min_demo_fraction or change the "
-                    "indicator or window"
+                    f"The demonstrations end about where they start (a median {travel:.3g} "
+                    f"from start to end over a path of {walked:.3g}): they wander in place, or "
+                    "return to where they began, so the goal region, fitted to where they "
+                    "end, holds their starts. SWIRL marks segments by regions of states: it "
+                    "needs demos that end away from their start, or a state that tells the "
+                    "two apart (a progress or time variable in the observation), and "
+                    "transitions every demo shares. Otherwise lower min_demo_fraction or "
+                    "change the indicator or window"
                 )
             else:
                 advice = (

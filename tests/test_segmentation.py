@@ -341,7 +341,7 @@ def test_demonstrations_that_do_not_move_are_a_clear_error():
     rng = np.random.default_rng(0)
     still = [np.ones((20, 2)) + rng.normal(scale=1e-3, size=(20, 2)) for _ in range(4)]
     with pytest.raises(
-        ValueError, match=r"demo 0 (starts inside|never reaches).*(move|wander in place)"
+        ValueError, match=r"demo 0 (starts inside|never reaches).*(move|end about where they start)"
     ):
         TransitionStateClustering(random_state=0).fit(still)
 
@@ -702,11 +702,18 @@ def test_phases_indicator_checks_its_demonstrations():
         phases_indicator(bad)
 
 
-def test_demonstrations_that_wander_in_place_are_told_so():
+def test_demonstrations_that_end_where_they_start_are_told_so():
     rng = np.random.default_rng(2)
     noise = [rng.standard_normal((100, 2)) for _ in range(5)]
-    with pytest.raises(ValueError, match="wander in place"):
-        TransitionStateClustering(random_state=0).fit(noise)
+    # up, hold, back down in 1-D: the end is the start (the velocity indicator's fit fails)
+    steps = np.r_[np.full(30, 0.1), np.zeros(30), np.full(30, -0.1)]
+    back = [
+        np.cumsum(np.r_[0, steps + 0.005 * np.random.default_rng(s).standard_normal(90)])[:, None]
+        for s in range(5)
+    ]
+    for demos, indicator in ((noise, "auto"), (back, "velocity")):
+        with pytest.raises(ValueError, match="end about where they start"):
+            TransitionStateClustering(indicator=indicator, random_state=0).fit(demos)
 
 
 def _corners(seed, jitter, legs=(100, 100, 80), noise=0.002, n_demos=10):
