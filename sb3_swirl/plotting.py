@@ -255,7 +255,8 @@ def plot_transitions(
                     entered[0], color=colors[i - 1], lw=2, alpha=0.8, label=f"enters region {i - 1}"
                 )
         ax.set_ylabel(f"demo {k}\nspeed", fontsize="small")
-        ax.set_xlim(0, len(z) - 1)
+        pad = max(0.5, 0.01 * len(z))  # a region entered at the last step stays in view
+        ax.set_xlim(-pad, len(z) - 1 + pad)
     axes[-1].set_xlabel("step")
     handles, labels = [], []
     for ax in fig.axes:  # the panels and their twins

@@ -80,6 +80,8 @@ def test_plot_transitions_marks_candidates_and_region_entries(fitted, tmp_path):
         int(np.argmax(steps >= i)) for i in range(1, task.n_indices)
     ]
     assert (tmp_path / "transitions.png").stat().st_size > 1000
+    low, high = first.get_xlim()  # every entry inside the panel, not on its border
+    assert all(low < ln.get_xdata()[0] < high for ln in entries)
     # demos the task was not fitted on: no candidates, said in the title
     other, _ = make_piecewise_linear_demos(n_demos=4, dim=3, noise=0.1, random_state=5)
     fig = plot_transitions(other, task)
