@@ -367,16 +367,19 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
             found.append((n, "typical step", step, _RATE_WHY))
         elif _off(length, _RATE_FACTOR):
             found.append((n, "number of steps", length, _LENGTH_WHY))
-    messages = []
     if len(states) == 2 and len(found) == 2:  # two demos: which one is off cannot be told
         n, what, factor, why = max(found, key=lambda f: f[2])
-        messages.append(
+        messages = [
             f"demos 0 and 1: the {what} of demo {n} is {factor:.2g} times demo {1 - n}'s: one "
             f"of them {why}"
-        )
-    for n, what, factor, why in found if not messages else ():
-        ratio = f"{factor:.2g} times" if factor > 1 else f"1/{1 / factor:.2g} of"
-        messages.append(f"demo {n}: its {what} is {ratio} the other demos' (median): {why}")
+        ]
+    else:
+        messages = [
+            f"demo {n}: its {what} is "
+            + (f"{factor:.2g} times" if factor > 1 else f"1/{1 / factor:.2g} of")
+            + f" the other demos' (median): {why}"
+            for n, what, factor, why in found
+        ]
     for message in messages:
         warnings.warn(message, DemoWarning, stacklevel=3)
     return messages

@@ -61,14 +61,17 @@ _ENTRY_GAP = 0.1
 
 
 # ---------------------------------------------------------------------------- helpers
-def _constant_columns(x: np.ndarray) -> np.ndarray:
-    """Which columns of ``x`` are constant: no spread beyond rounding of their own values."""
-    return ~(x.std(axis=0) > 1e-12 * np.maximum(1.0, np.abs(x).max(axis=0, initial=0.0)))
+def _constant_columns(x: np.ndarray, std: np.ndarray | None = None) -> np.ndarray:
+    """Which columns of ``x`` are constant: no spread beyond rounding of their own values
+    (``std``: the columns' standard deviations, when already at hand)."""
+    std = x.std(axis=0) if std is None else std
+    return ~(std > 1e-12 * np.maximum(1.0, np.abs(x).max(axis=0, initial=0.0)))
 
 
 def _scale(x: np.ndarray) -> np.ndarray:
     """Per-column standard deviation, with constant columns given scale 1."""
-    return np.where(_constant_columns(x), 1.0, x.std(axis=0))
+    std = x.std(axis=0)
+    return np.where(_constant_columns(x, std), 1.0, std)
 
 
 def _local_maxima(score: np.ndarray, threshold: float, radius: int) -> np.ndarray:
@@ -1694,8 +1697,9 @@ by "+", or callable, default "auto"
         another point) is entered at its edge: the online segmentation, and the agent's, then
         switches before or after the demos' transitions. A demo is far from its transition
         into a region when the gap exceeds both ``max(3, 3 %`` of its length``)`` steps (the
-        segmentation benchmark's tolerance) and ``_ENTRY_GAP`` of its segment that ends there;
-        warned when most of the region's demos are. Only with ``align_entries=True``: without
+        segmentation benchmark's tolerance, :func:`switch_scores`, before rounding up) and
+        ``_ENTRY_GAP`` of its segment that ends there; warned when most of the region's demos
+        are. Only with ``align_entries=True``: without
         it the regions of Algorithm 1 are entered early by construction (the shipped tasks'
         fit).
         """
@@ -1708,7 +1712,7 @@ by "+", or callable, default "auto"
             for d, step in members:
                 entry, start = self.segments_[d][k], self.segments_[d][k - 1] if k else 0
                 gap = int(entry - step)
-                tolerance = max(3.0, 0.03 * lengths[d])
+                tolerance = max(3.0, 0.03 * lengths[d])  # switch_scores' before rounding up
                 if entry > 0 and abs(gap) > tolerance and abs(gap) > _ENTRY_GAP * (step - start):
                     far[d] = gap
             if 2 * len(far) <= len(members):
