@@ -18,6 +18,10 @@ from rich.table import Table
 from sb3_swirl.experiments import PRESETS, REPRODUCTIONS
 
 console = Console(stderr=True)
+# another indicator's dynamics error within 1% of the kept one's is a near tie; `fit` says so
+# when its segment count differs (on the segmentation benchmark: 11 of 145 tuning sets and 5
+# of 145 held-out ones, 4 and 2 of them fits with a switch F1 under 0.9)
+_NEAR_TIE = 0.01
 
 
 def _dims(text: str) -> list[int]:
@@ -156,13 +160,16 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     )
     scores = task.metadata["indicator_scores"]
     if len(scores) > 1:
+        segments = task.metadata["indicator_segments"]
         tried = ", ".join(
-            f"{name} {'failed' if error is None else f'{error:.4g}'}"
+            f"{name} failed" if error is None else f"{name} {error:.4g} ({segments[name]})"
             for name, error in scores.items()
         )
         console.print(
-            f"indicator: {task.metadata['indicator']} (dynamics error, lower is better: {tried})"
+            f"indicator: {task.metadata['indicator']} (dynamics error, lower is better, and "
+            f"segments: {tried})"
         )
+        _print_near_ties(task.metadata["indicator"], scores, segments)
         for name, why in task.metadata.get("indicator_failures", {}).items():
             console.print(f"  {name} failed: {why}", markup=False)
     switches = task.metadata["switches"]
@@ -173,6 +180,27 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     )
     _print_task(task)
     return 0
+
+
+def _print_near_ties(kept: str, scores: dict, segments: dict) -> None:
+    """Say which other indicators explain the demos nearly as well with another count."""
+    close: dict[int, list[str]] = {}
+    for name, error in scores.items():
+        if (
+            error is not None
+            and segments[name] not in (0, segments[kept])
+            and error <= scores[kept] * (1 + _NEAR_TIE)
+        ):
+            close.setdefault(segments[name], []).append(name)
+    for count, names in close.items():
+        gap = max(scores[name] for name in names) / scores[kept] - 1
+        console.print(
+            f"  {' and '.join(names)} explain{'s' * (len(names) == 1)} the demos nearly as well "
+            f"(within {100 * gap:.1f}%) with {count} segment{'s' * (count != 1)} against "
+            f"{segments[kept]}: the "
+            f"demos barely decide between them; to compare, fit with --indicator {names[-1]} "
+            "and look at both with `sb3-swirl show TASK --plot DIR --demos DEMOS`"
+        )
 
 
 def _print_task(task) -> None:

@@ -148,7 +148,8 @@ def fit_task(
     TaskModel
         With ``metadata`` recording the estimators and their parameters, ``dims``, the
         number of demonstrations and their lengths, the indicator used (``"indicator"``, the
-        one ``"auto"`` chose) and each indicator's :func:`~sb3_swirl.dynamics_cv_error`.
+        one ``"auto"`` chose), each indicator's :func:`~sb3_swirl.dynamics_cv_error` and the
+        number of segments each gave (``"indicator_scores"``, ``"indicator_segments"``).
 
     Examples
     --------
@@ -260,6 +261,7 @@ def fit_task(
             name: error if np.isfinite(error) else None
             for name, error in segmenter.indicator_scores_.items()
         },
+        "indicator_segments": segmenter.indicator_segments_,  # 0: that indicator's fit failed
         "indicator_failures": segmenter.indicator_failures_,
         "dropped_regions": segmenter.dropped_regions_,
         "cluster_dims": None

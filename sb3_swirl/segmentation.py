@@ -1279,6 +1279,10 @@ by "+", or callable, default "auto"
     indicator_scores_ : dict of str to float
         :func:`dynamics_cv_error` of each indicator tried (``inf`` where its fit failed;
         ``"callable"`` for your own).
+    indicator_segments_ : dict of str to int
+        The number of segments each indicator tried gave (0 where its fit failed): with
+        ``"auto"``, candidates whose scores lie close with other counts show how firmly the
+        demonstrations decide between them.
     indicator_failures_ : dict of str to str
         Why each indicator ``"auto"`` tried and that failed gave no segmentation (empty
         otherwise).
@@ -1403,6 +1407,7 @@ by "+", or callable, default "auto"
                 self.indicator_ = self.indicator
                 name = self.indicator if isinstance(self.indicator, str) else "callable"
                 self.indicator_scores_ = {name: self._dynamics_error(demos)}
+                self.indicator_segments_ = {name: len(self.regions_)}
                 self.indicator_failures_ = {}
         self._warn_lost()
         self._warn_entries([len(d) for d in demos])
@@ -1412,6 +1417,7 @@ by "+", or callable, default "auto"
         """Fit with each of ``_AUTO_CANDIDATES``; keep the lowest :func:`dynamics_cv_error`."""
         fits: dict[str, tuple[TransitionStateClustering, list]] = {}
         scores: dict[str, float] = {}
+        segments: dict[str, int] = {}
         failures: dict[str, str] = {}
         for name in _AUTO_CANDIDATES:
             candidate = clone(self).set_params(indicator=name)
@@ -1420,9 +1426,10 @@ by "+", or callable, default "auto"
                     candidate._fit(demos)
                 except ValueError as exc:
                     failures[name] = str(exc)
-                    scores[name] = math.inf
+                    scores[name], segments[name] = math.inf, 0
                     continue
             scores[name] = candidate._dynamics_error(demos)
+            segments[name] = len(candidate.regions_)
             fits[name] = (candidate, caught)
         if not fits:
             reasons: dict[str, list[str]] = {}
@@ -1439,6 +1446,7 @@ by "+", or callable, default "auto"
                 setattr(self, key, value)
         self.indicator_ = best
         self.indicator_scores_ = scores
+        self.indicator_segments_ = segments
         self.indicator_failures_ = failures
         for w in caught:  # e.g. a GMM that did not converge: the chosen fit's only
             warnings.warn(w.message, w.category, stacklevel=3)

@@ -402,7 +402,11 @@ def test_auto_keeps_the_indicator_that_explains_the_dynamics_best(kind):
     assert auto.indicator_ == min(scores, key=scores.__getitem__)
     alone = TransitionStateClustering(indicator=auto.indicator_, random_state=0).fit(demos)
     assert alone.indicator_scores_ == {auto.indicator_: scores[auto.indicator_]}
+    assert alone.indicator_segments_ == {auto.indicator_: len(auto.regions_)}
     assert len(alone.regions_) == len(auto.regions_)
+    for name, count in auto.indicator_segments_.items():  # each candidate's own count
+        fit = TransitionStateClustering(indicator=name, random_state=0).fit(demos)
+        assert len(fit.regions_) == count
     for a, b in zip(alone.regions_, auto.regions_, strict=True):
         np.testing.assert_array_equal(a.mean, b.mean)
     for a, b in zip(alone.switches_, auto.switches_, strict=True):
