@@ -293,6 +293,8 @@ def make_swirl_env(
         ``DummyVecEnv`` (default) or ``SubprocVecEnv``.
     vec_env_kwargs : dict, optional
         Passed to ``vec_env_cls`` (e.g. ``{"start_method": "spawn"}``).
+    **make_kwargs
+        Passed to ``gym.make`` when ``env`` is an id (e.g. ``radius=2.0``); refused otherwise.
 
     Returns
     -------
@@ -316,6 +318,11 @@ def make_swirl_env(
         raise ValueError(
             f"an env instance can back only one sub-env, got n_envs={n_envs}; "
             "pass an env id or a factory instead"
+        )
+    if make_kwargs and not isinstance(env, str):
+        raise TypeError(
+            f"make_swirl_env passes {sorted(make_kwargs)} to gym.make, which only runs for an "
+            f"env id; got {type(env).__name__}: give the settings to your env or factory instead"
         )
     factory = _SwirlEnvFactory(env, task, dict(wrapper_kwargs or {}), make_kwargs)
     vec_env_cls = vec_env_cls or DummyVecEnv

@@ -809,6 +809,21 @@ def test_one_episode_returns_python_numbers():
     assert type(env.segment) is int and type(env.potential) is float
 
 
+def test_make_swirl_env_passes_env_settings_to_gym_make_only():
+    from sb3_swirl import make_swirl_env
+
+    task = TaskModel(
+        [Region([0.0, 0.0], np.eye(2), 4.0)], [QuadraticReward([0.0, 0.0], np.eye(2))], dims=(0, 1)
+    )
+    venv = make_swirl_env("sb3_swirl/ParallelParking-v0", task, max_speed=0.5)
+    assert venv.get_attr("unwrapped")[0].max_speed == 0.5
+    venv.close()
+    with pytest.raises(TypeError, match=r"\['radius'\] to gym.make.*got function"):
+        make_swirl_env(lambda: PointEnv(), line_task(), radius=2.0)  # was ignored silently
+    with pytest.raises(TypeError, match="got PointEnv"):
+        make_swirl_env(PointEnv(), line_task(), radius=2.0)
+
+
 # ----------------------------------------------------------------------- subprocess workers
 def test_make_swirl_env_runs_in_fresh_worker_processes():
     """Workers started fresh (``spawn``) know nothing of sb3_swirl: the factory imports it
