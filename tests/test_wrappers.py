@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 import subprocess
 import sys
@@ -807,6 +808,23 @@ def test_one_episode_returns_python_numbers():
     assert type(reward) is float and type(terminated) is bool
     assert type(info["segment"]) is int and type(info["segment_reward"]) is float
     assert type(env.segment) is int and type(env.potential) is float
+
+
+def test_a_task_on_states_of_another_width_than_its_fit_is_warned_about():
+    """Demos recorded with ``observation_dims=[6, 7, 8]`` (9 values), the env made without
+    them (31): dims 0-2 then read the gripper's position, not the object's offset."""
+    fitted = TaskModel(
+        [Region([0.0, 0.0], np.eye(2), 4.0)],
+        [QuadraticReward([0.0, 0.0], np.eye(2))],
+        dims=(0, 1),
+        metadata={"state_dim": 6},
+    )
+    with pytest.warns(UserWarning, match="fitted on states of 6 values and is given states of 4"):
+        SwirlWrapper(gym.make("CartPole-v1"), fitted)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for metadata in ({"state_dim": 4}, {}):  # the same width, or not recorded
+            SwirlWrapper(gym.make("CartPole-v1"), dataclasses.replace(fitted, metadata=metadata))
 
 
 def test_make_swirl_env_passes_env_settings_to_gym_make_only():
