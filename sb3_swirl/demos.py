@@ -63,12 +63,21 @@ def _field(item: Any, names: Sequence[str]) -> tuple[bool, Any]:
 def _numeric(value: Any, what: str) -> np.ndarray:
     types = sys.modules.get("imitation.data.types")  # imitation's DictObs, where it is loaded
     if isinstance(value, Mapping) or (types is not None and isinstance(value, types.DictObs)):
-        raise ValueError(f"{what} are a dict; flatten dict observations/actions first")
+        raise ValueError(
+            f"{what} are a dict; join each step's values in the order of the wrapper's "
+            "state_key first (swirl_wrappers.observation_state(obs, state_key) does it for "
+            "one step), as collect_demos(..., state_key=...) records them"
+        )
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{what} cannot be read as one numeric array ({exc})") from exc
     if arr.dtype.kind not in "biuf":
+        if arr.dtype == object and arr.size and isinstance(arr.flat[0], Mapping):
+            raise ValueError(
+                f"{what} are a list of dicts, one per step; join each step's values in the "
+                "order of the wrapper's state_key first (swirl_wrappers.observation_state)"
+            )
         raise ValueError(f"{what} have non-numeric dtype {arr.dtype}")
     return arr
 

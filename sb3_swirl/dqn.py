@@ -182,6 +182,13 @@ class SwirlDQN(DQN):
         )
         InverseDynamics.from_kwargs(inverse_dynamics_kwargs)  # bad settings fail now
         self.inverse_dynamics_kwargs = dict(inverse_dynamics_kwargs or {})
+        actions = getattr(env, "action_space", None)  # an id: SB3 makes the env and checks
+        if actions is not None and not isinstance(actions, spaces.Discrete):
+            raise ValueError(
+                f"SwirlDQN needs discrete actions (it is a DQN), and the env has {actions}: "
+                "train another SB3 algorithm (SAC, TD3, PPO) on the same SwirlWrapper, without "
+                "the BC start"
+            )
         if prefill_replay and optimize_memory_usage:
             raise ValueError(
                 "prefill_replay needs a replay buffer without optimize_memory_usage: the "
@@ -309,6 +316,17 @@ class SwirlDQN(DQN):
             "the environment's (unlifted) observations",
             " (demos must be states of the env under the SWIRL wrapper)",
         )
+        unlabelled = [i for i, d in enumerate(self.demonstrations) if d.actions is None]
+        if (
+            unlabelled
+            and self.infer_actions == "inverse_dynamics"
+            and isinstance(self.observation_space, spaces.Dict)
+        ):
+            raise ValueError(
+                f"demonstrations {unlabelled} have no actions, and inferring them needs a flat "
+                "Box observation: on Dict observations give demos with actions (or "
+                "infer_actions='none' to clone only those that have them)"
+            )
 
     def _demo_space(self) -> spaces.Box:
         """The space of a demo state: the unlifted observation (Box), or on Dict observations

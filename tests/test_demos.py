@@ -174,7 +174,15 @@ def _bad(index, array):
             _bad(1, {"obs": np.zeros((5, 2)), "acts": np.zeros(4), "rews": np.zeros(3)}),
             r"demo 1: rewards must have shape",
         ),
-        (_bad(2, {"observations": {"a": np.zeros((5, 2))}}), "demo 2: observations are a dict"),
+        (
+            _bad(2, {"observations": {"a": np.zeros((5, 2))}}),
+            "demo 2: observations are a dict; join each step's values in the order of the "
+            "wrapper's state_key",
+        ),
+        (
+            _bad(1, {"observations": [{"a": np.zeros(2)}] * 5}),
+            "demo 1: observations are a list of dicts, one per step",
+        ),
         (
             _bad(1, {"states": np.zeros((5, 2)), "act": np.zeros(4)}),
             r"demo 1 is a mapping without 'observations' or 'obs' \(its keys: \['act', 'states'\]",

@@ -99,6 +99,15 @@ def success_count(model, env: gym.Env, n_episodes: int, seed: int) -> int:
     return successes
 
 
+def test_continuous_actions_are_refused_with_what_to_train_instead():
+    task = TaskModel(
+        [Region([0.0], [[0.01]], 1.0)], [QuadraticReward([0.0], [[1.0]])], dims=(2,)
+    )  # Pendulum's angular velocity
+    env = SwirlWrapper(gym.make("Pendulum-v1"), task)
+    with pytest.raises(ValueError, match=r"needs discrete actions.*Box.*SAC, TD3, PPO"):
+        SwirlDQN("MlpPolicy", env)  # was SB3's AssertionError
+
+
 def test_double_q_scores_the_online_nets_action_with_the_target_net():
     model = SwirlDQN("MlpPolicy", point_env(), demonstrations=point_demos(2), seed=0)
     obs = th.as_tensor(np.stack([model.observation_space.sample() for _ in range(16)]))

@@ -155,6 +155,9 @@ def test_supervisors_succeed_and_demos_record_the_state_keys(task):
 def test_state_key_is_for_dict_observations():
     with pytest.raises(ValueError, match="state_key is for Dict observations"):
         collect_demos("sb3_swirl/ParallelParking-v0", 1, state_key="observation")
+    # an unknown key is named before an episode runs (it was a KeyError after the first)
+    with pytest.raises(ValueError, match="state_key 'goal' is not in the observation space"):
+        collect_demos(_ids("Push"), 1, state_key=["observation", "goal"])
 
 
 # ------------------------------------------------------------------ goal envs and HER
@@ -343,6 +346,18 @@ def test_swirl_dqn_clones_and_prefills_dict_demos_and_saves_them(tmp_path):
     assert loaded.replay_buffer.n_steps == 5
     obs, _ = env.reset(seed=0)
     assert loaded.predict(obs, deterministic=True)[0] == model.predict(obs, deterministic=True)[0]
+
+
+def test_state_only_demos_on_dict_observations_are_refused_when_the_model_is_built():
+    demos = collect_demos(_ids("Reach"), 2, seed=0, state_key=KEYS, goal_offset=True)
+    env = SwirlWrapper(
+        gym.make(_ids("Reach"), goal_offset=True), _goal_task([16, 17, 18]), state_key=KEYS
+    )
+    states = [demos[0], demos[1].observations]  # the second without actions
+    with pytest.raises(ValueError, match=r"demonstrations \[1\] have no actions.*flat Box"):
+        SwirlDQN("MultiInputPolicy", env, demonstrations=states)  # was: inside learn()
+    model = SwirlDQN("MultiInputPolicy", env, demonstrations=states, infer_actions="none")
+    assert model.pretrain()["n_pairs"] == len(demos[0])
 
 
 def test_keys_extractor_reads_only_its_keys_and_saves(tmp_path):

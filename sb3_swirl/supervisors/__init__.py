@@ -31,7 +31,7 @@ from sb3_swirl.supervisors.fetch import (
 )
 from sb3_swirl.supervisors.line_cutting import LineCuttingSupervisor
 from sb3_swirl.supervisors.tensioning import TensioningSupervisor
-from swirl_wrappers import observation_state
+from swirl_wrappers import observation_state, state_space
 from swirl_wrappers._validation import check_int
 
 #: env id -> ``"module:Class"`` of its supervisor, imported on first use
@@ -157,6 +157,11 @@ def collect_demos(
     env = gym.make(env_id, **env_kwargs)
     if isinstance(env.observation_space, gym.spaces.Dict):
         state_key = "observation" if state_key is None else state_key
+        try:  # an unknown key is named before any episode runs
+            state_space(env.observation_space, state_key)
+        except ValueError:
+            env.close()
+            raise
     elif state_key is not None:
         env.close()
         raise ValueError(f"state_key is for Dict observations; {env_id}'s are not")
