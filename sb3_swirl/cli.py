@@ -34,6 +34,22 @@ def _dims(text: str) -> list[int]:
         ) from None
 
 
+def _env_kwarg(text: str) -> tuple[str, Any]:
+    """``--env-kwarg observation_dims=[6,7,8]``: a setting of ``gym.make``, its value JSON (or a
+    plain string)."""
+    import json
+
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip().isidentifier():
+        raise argparse.ArgumentTypeError(
+            f"expected NAME=VALUE (e.g. goal_offset=true), got {text!r}"
+        )
+    try:
+        return key.strip(), json.loads(value)
+    except json.JSONDecodeError:
+        return key.strip(), value
+
+
 def _angles(text: str) -> list[list[int]]:
     """``--angles 0;0,1``: ';'-separated groups of dims, each summed into one angle."""
     groups = [_dims(group) for group in text.split(";")]
@@ -109,7 +125,25 @@ def _cmd_demos(args: argparse.Namespace) -> int:
 
     _check_output(args.output)
     console.print(f"collecting {args.n} demos of {args.env_id}")
-    demos = collect_demos(args.env_id, args.n, seed=args.seed, progress=not args.quiet)
+    state_key = None if args.state_key is None else [k for k in args.state_key.split(",") if k]
+    env_kwargs = dict(args.env_kwarg)
+    if env_kwargs:  # a setting the env does not take is named here, not in a traceback
+        import gymnasium as gym
+
+        try:
+            gym.make(args.env_id, **env_kwargs).close()
+        except TypeError as exc:
+            raise ValueError(
+                f"--env-kwarg: {args.env_id} does not take {env_kwargs}: {exc}"
+            ) from None
+    demos = collect_demos(
+        args.env_id,
+        args.n,
+        seed=args.seed,
+        progress=not args.quiet,
+        state_key=state_key,
+        **env_kwargs,
+    )
     Path(args.output).parent.mkdir(parents=True, exist_ok=True)
     save_demos(demos, args.output)
     lengths = [len(d) for d in demos]
@@ -351,6 +385,20 @@ def build_parser() -> argparse.ArgumentParser:
         "--seed", type=_seed, default=0, help="seeds the episodes and the supervisor (default 0)"
     )
     p.add_argument("-o", "--output", required=True, help="output .npz file")
+    p.add_argument(
+        "--state-key",
+        help="Dict observations (Fetch): the comma-separated keys a demo records, joined in "
+        "this order, the wrapper's state_key (default: observation)",
+    )
+    p.add_argument(
+        "--env-kwarg",
+        type=_env_kwarg,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a setting of the env, its value JSON (repeatable; e.g. goal_offset=true "
+        "observation_dims=[6,7,8])",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_demos)
 

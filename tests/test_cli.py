@@ -336,6 +336,19 @@ def test_fit_auto_prints_which_indicator_it_kept(tmp_path, capsys):
     assert f"indicator: {chosen} (dynamics error" in capsys.readouterr().err
 
 
+def test_demos_of_a_dict_env_record_the_state_keys_and_env_settings(tmp_path, capsys):
+    path = tmp_path / "reach.npz"
+    keys = "observation,achieved_goal,desired_goal,goal_offset"
+    argv = ["demos", "sb3_swirl/FetchReachDiscrete-v0", "-n", "2", "-o", str(path), "-q"]
+    assert main([*argv, "--state-key", keys, "--env-kwarg", "goal_offset=true"]) == 0
+    assert [d.observations.shape[1] for d in load_demos(path)] == [10 + 3 + 3 + 3] * 2
+    assert main([*argv, "--env-kwarg", "no_such_setting=1"]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "error: --env-kwarg: sb3_swirl/FetchReachDiscrete-v0 does not take" in err
+    with pytest.raises(SystemExit):
+        main([*argv, "--env-kwarg", "goal_offset"])  # no value: argparse's usage error
+
+
 def test_fit_says_when_another_indicator_nearly_ties_with_another_count(capsys):
     from sb3_swirl.cli import _print_near_ties
 
