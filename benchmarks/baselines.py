@@ -14,7 +14,8 @@ schedule (true success over ``preset.n_eval_episodes`` greedy episodes every
 
 Prints, per task, each method's rollouts to 95 % true success (median over seeds, with how
 many seeds reached it), final and best success, and wall time; writes
-``results/baselines/results.json`` with every seed's curve.
+``results/baselines/results.json`` with every seed's curve (``--quick``: ``results_quick.json``
+and ``runs_quick.jsonl``, beside a full run's).
 
 Runs go through :func:`sb3_swirl.runner.run_sweep`: each run's record lands in
 ``OUT/runs.jsonl`` as it finishes (``--resume`` continues an interrupted sweep), on local
@@ -30,9 +31,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 from pathlib import Path
 from typing import Any
+
+from _cli import integer, run_main
 
 TASKS = {
     "parking": "sb3_swirl/ParallelParking-v0",
@@ -44,16 +48,16 @@ DEFAULT_TASKS = ["parking", "partial"]
 
 
 def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """One method's runs on one task: seeds, how many reached 95 %, the median rollouts to it
+    (``None`` where half the seeds or more never reached it), mean final and best success and
+    wall time."""
     reached = [r["rollouts_to_target"] for r in records if r["rollouts_to_target"] is not None]
+    # seeds that never reach the target count as +inf: a median over all seeds
+    median = statistics.median(reached + [math.inf] * (len(records) - len(reached)))
     return {
         "n_seeds": len(records),
         "reached": len(reached),
-        # seeds that never reach the target count as +inf: a median over all seeds
-        "median_rollouts": (
-            statistics.median(reached + [float("inf")] * (len(records) - len(reached)))
-            if records
-            else None
-        ),
+        "median_rollouts": None if math.isinf(median) else median,
         "final_success_mean": statistics.mean(r["final_success"] for r in records),
         "best_success_mean": statistics.mean(r["best_success"] for r in records),
         "wall_time_s_mean": statistics.mean(r["wall_time_s"] for r in records),
@@ -67,12 +71,12 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", default=DEFAULT_TASKS, choices=list(TASKS))
-    parser.add_argument("--seeds", type=int, nargs="+", default=[10, 11, 12, 13, 14])
+    parser.add_argument("--seeds", type=integer(0), nargs="+", default=[10, 11, 12, 13, 14])
     # the parking cars are not goal envs (HER runs in `sb3-swirl reproduce fetch`)
     methods = [m for m in METHODS if m not in GOAL_ENV_METHODS]
     parser.add_argument("--methods", nargs="+", default=methods, choices=methods)
-    parser.add_argument("--total-timesteps", type=int, default=30_000)
-    parser.add_argument("--jobs", type=int, default=2, help="runs at once (local CPUs)")
+    parser.add_argument("--total-timesteps", type=integer(1), default=30_000)
+    parser.add_argument("--jobs", type=integer(1), default=2, help="runs at once (local CPUs)")
     parser.add_argument("--backend", default="joblib", choices=BACKENDS)
     parser.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
     parser.add_argument(
@@ -91,7 +95,10 @@ def main(argv: list[str] | None = None) -> int:
         if not (task != "parking" and method.endswith("_model"))
         for seed in seeds
     ]
+    if not jobs:
+        parser.error("no run: the *_model methods run on parking only (its car's model is known)")
     path = Path(args.out)
+    suffix = "_quick" if args.quick else ""  # a smoke run never touches a full run's files
     schedule = {"eval_freq": 500, "n_eval_episodes": 3} if args.quick else {}
     records = run_sweep(
         method_run,
@@ -100,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
             | schedule
             for task, m, seed in jobs
         ],
-        path / "runs.jsonl",
+        path / f"runs{suffix}.jsonl",
         backend=args.backend,
         n_jobs=args.jobs,
         address=args.address,
@@ -108,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     for (task, _, seed), record in zip(jobs, records, strict=True):
         record.update(task=task, seed=seed, total_timesteps=steps)
-    out: dict[str, Any] = {"settings": vars(args), "records": records, "summary": {}}
+    settings = vars(args) | {"seeds": seeds, "total_timesteps": steps}  # what ran
+    out: dict[str, Any] = {"settings": settings, "records": records, "summary": {}}
     for task in args.tasks:
         print(f"\n{task} ({TASKS[task]}), {len(seeds)} seeds, {steps} steps per method")
         print(
@@ -122,16 +130,16 @@ def main(argv: list[str] | None = None) -> int:
             s = summarise(rows)
             out["summary"][f"{task}/{method}"] = s
             median = s["median_rollouts"]
-            shown = "not reached" if median == float("inf") else f"{median:g}"
+            shown = "not reached" if median is None else f"{median:g}"
             print(
                 f"{method:<20} {shown:>16} {s['reached']:>4}/{s['n_seeds']:<3} "
                 f"{s['final_success_mean']:>6.2f} {s['best_success_mean']:>6.2f} "
                 f"{s['wall_time_s_mean']:>7.1f}"
             )
-    (path / "results.json").write_text(json.dumps(out, indent=1, default=str))
-    print(f"\nwrote {path / 'results.json'}")
+    (path / f"results{suffix}.json").write_text(json.dumps(out, indent=1, default=str))
+    print(f"\nwrote {path / f'results{suffix}.json'}")
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

@@ -219,6 +219,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--no-parking", action="store_true")
     parser.add_argument("--json", help="write every row to this file")
     args = parser.parse_args(argv)
+    args.methods = list(dict.fromkeys(args.methods))  # a method named twice runs once
+    if args.json:  # a path that cannot be written fails now, not after the fits
+        try:
+            with open(args.json, "a"):
+                pass
+        except OSError as exc:
+            parser.error(f"--json: cannot write {args.json} ({exc.strerror})")
     seeds = SEEDS[args.split][:1] if args.quick else SEEDS[args.split]
     sets = generator_sets(seeds, args.quick)
     if not args.no_parking:

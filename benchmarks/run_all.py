@@ -1,8 +1,10 @@
-"""Run every benchmark in this folder, one after the other (``make bench``).
+"""Run the benchmarks in this folder, one after the other (``make bench``).
 
 Each benchmark prints ratios measured side by side in one run. ``--quick`` runs each in its
-smoke mode; the long sample-efficiency and baseline studies run only with ``--with-slow``
-(each in its own ``results/bench/<time>/`` folder).
+smoke mode; the long studies (sample efficiency, the baselines, SwirlDQN's stability over 20
+seeds) run only with ``--with-slow`` (the sweeps each in its own ``results/bench/<time>/``
+folder). ``acrobot_rules.py`` is not a benchmark but a check of how hard the acrobots are (the
+README's Environments): run it on its own.
 """
 
 from __future__ import annotations
@@ -32,7 +34,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="smoke mode of each benchmark")
     parser.add_argument(
-        "--with-slow", action="store_true", help="also the sample-efficiency and baseline studies"
+        "--with-slow",
+        action="store_true",
+        help="also the sample-efficiency, baseline and SwirlDQN-stability studies",
     )
     args = parser.parse_args()
     failed = []

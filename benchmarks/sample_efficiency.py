@@ -19,10 +19,11 @@ median over seeds an upper bound (:func:`sb3_swirl.experiments.rollout_ratio` an
 uses the same ones). Targets on the median: parking <= 0.15 (paper) and
 <= 0.10 (this project), acrobot <= 0.3.
 
-Writes ``results/sample_efficiency/results.json``; every run's record lands in
-``runs.jsonl`` as it finishes (:func:`sb3_swirl.runner.run_sweep`: ``--resume`` continues an
-interrupted sweep, or only summarises a finished one; ``--backend ray`` runs it on a Ray
-cluster). Not a test (hours of CPU at full size).
+Writes ``results/sample_efficiency/results.json`` (``--quick``: ``results_quick.json``); every
+run's record lands in ``runs.jsonl`` (``runs_quick.jsonl``) as it finishes
+(:func:`sb3_swirl.runner.run_sweep`: ``--resume`` continues an interrupted sweep, or only
+summarises a finished one; ``--backend ray`` runs it on a Ray cluster). Not a test (hours of
+CPU at full size).
 
 Run: ``.venv/bin/python benchmarks/sample_efficiency.py [--quick] [--seeds 10 11 12 13 14]
 [--tasks parking acrobot] [--jobs 2] [--backend joblib|ray] [--total-timesteps N
@@ -37,6 +38,8 @@ import math
 import time
 from pathlib import Path
 from typing import Any
+
+from _cli import integer, run_main
 
 from sb3_swirl.experiments import rollout_ratio, summarise_ratios, write_results
 from sb3_swirl.runner import BACKENDS, run_sweep
@@ -112,7 +115,11 @@ def _fmt_ratio(row: dict[str, Any]) -> str:
     return {"=": f"{ratio:.3f}", "<": f"< {ratio:.3f} (DQN censored)", ">": f"> {ratio:.3f}"}[kind]
 
 
-def print_task(task: str, rows: list[dict[str, Any]], summary: dict[str, Any]) -> None:
+def print_task(
+    task: str, rows: list[dict[str, Any]], summary: dict[str, Any], quick: bool = False
+) -> None:
+    """Print one task's seeds, the median ratio and the verdict on each target (none for a
+    ``--quick`` smoke run); records the verdicts in ``summary["targets"]``."""
     print(f"\n{task}: training episodes to target (SWIRL vs DQN)")
     print(f"{'seed':>5}  {'target':>6}  {'SWIRL':>24}  {'DQN':>24}  ratio SWIRL/DQN")
     for r in rows:
@@ -126,7 +133,10 @@ def print_task(task: str, rows: list[dict[str, Any]], summary: dict[str, Any]) -
         f"{summary['theirs_reached']}/{n}"
     )
     if summary["median"] is None:
-        print("median ratio: unresolved (half the seeds or more have only a lower bound)")
+        print(
+            "median ratio: unresolved (half the seeds or more have no upper bound: only a lower "
+            "bound, or undefined)"
+        )
         verdicts = ["not shown" for _ in RATIO_TARGETS[task]]
     else:
         sign = "=" if summary["bound"] == "=" else "<="
@@ -140,6 +150,8 @@ def print_task(task: str, rows: list[dict[str, Any]], summary: dict[str, Any]) -
                 f"{summary['n_infinite']} seed(s) without an upper bound count as +inf"
             )
         verdicts = ["PASS" if summary["median"] <= t else "FAIL" for t in RATIO_TARGETS[task]]
+    if quick:  # one seed and 1500 steps measure no target
+        verdicts = ["no verdict (--quick)" for _ in RATIO_TARGETS[task]]
     for t, verdict in zip(RATIO_TARGETS[task], verdicts, strict=True):
         print(f"  target median ratio <= {t:.2f}: {verdict}")
     summary["targets"] = dict(zip([str(t) for t in RATIO_TARGETS[task]], verdicts, strict=True))
@@ -148,22 +160,22 @@ def print_task(task: str, rows: list[dict[str, Any]], summary: dict[str, Any]) -
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="1 seed, 1500 steps: a smoke run")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[10, 11, 12, 13, 14])
+    parser.add_argument("--seeds", type=integer(0), nargs="+", default=[10, 11, 12, 13, 14])
     parser.add_argument(
         "--tasks", nargs="+", default=["parking", "acrobot"], choices=["parking", "acrobot"]
     )
-    parser.add_argument("--jobs", type=int, default=2, help="training runs at once")
+    parser.add_argument("--jobs", type=integer(1), default=2, help="training runs at once")
     parser.add_argument("--backend", default="joblib", choices=BACKENDS)
     parser.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
     parser.add_argument(
         "--total-timesteps",
-        type=int,
+        type=integer(1),
         default=None,
         help="override the presets' step budget (the same for both methods)",
     )
     parser.add_argument(
         "--eval-freq",
-        type=int,
+        type=integer(1),
         default=None,
         help="override the presets' steps between evaluations (long budgets: evaluate less)",
     )
@@ -175,6 +187,8 @@ def main(argv: list[str] | None = None) -> int:
         "only summarise them)",
     )
     args = parser.parse_args(argv)
+    if args.quick and args.eval_freq is not None:
+        parser.error("--quick evaluates every 500 steps; leave out --eval-freq")
 
     out = Path(args.out)
     name = "results_quick.json" if args.quick else "results.json"
@@ -212,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
             for s in seeds
         ]
         summary = summarise_ratios(rows)
-        print_task(task, rows, summary)
+        print_task(task, rows, summary, args.quick)
         results["tasks"][task] = {
             "preset": dataclasses.asdict(preset),
             "total_timesteps": steps,
@@ -227,4 +241,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_main(main))

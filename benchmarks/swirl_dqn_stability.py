@@ -26,6 +26,7 @@ import warnings
 from typing import Any
 
 import numpy as np
+from _cli import integer, run_main
 
 
 def _parse(pairs: list[str]) -> dict[str, Any]:
@@ -145,23 +146,30 @@ def diagnose(seed: int, overrides: dict[str, Any], fit: dict[str, Any]) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=list(range(30, 50)))
+    parser.add_argument("--seeds", type=integer(0), nargs="+", default=list(range(30, 50)))
     parser.add_argument("--set", nargs="*", default=[], help="SwirlDQN settings, key=value")
     parser.add_argument("--fit", nargs="*", default=[], help="fit_task settings, key=value")
-    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--jobs", type=integer(1), default=2)
     parser.add_argument(
         "--final-episodes",
-        type=int,
+        type=integer(0),
         default=100,
         help="score the final policy on this many more episodes too (0: only the 20 of the "
         "last evaluation)",
     )
-    parser.add_argument("--diagnose", type=int, default=None, metavar="SEED")
+    parser.add_argument("--diagnose", type=integer(0), default=None, metavar="SEED")
     parser.add_argument("--quick", action="store_true", help="two seeds, a smoke run")
     args = parser.parse_args(argv)
     if args.quick:
         args.seeds = args.seeds[:2]
     overrides, fit = _parse(args.set), _parse(args.fit)
+    import inspect
+
+    from sb3_swirl import SwirlDQN
+
+    unknown = sorted(set(overrides) - set(inspect.signature(SwirlDQN).parameters))
+    if unknown:  # named now, not in a worker after the demos and the fit
+        parser.error(f"--set: SwirlDQN has no setting {unknown}")
     if args.diagnose is not None:
         diagnose(args.diagnose, overrides, fit)
         return
@@ -190,4 +198,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_main(main))

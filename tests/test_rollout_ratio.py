@@ -27,8 +27,9 @@ def test_exact_censored_and_unknown_ratios():
     assert rollout_ratio(never, never, 0.95)["kind"] == "?"
 
 
-def test_the_benchmark_targets_the_best_success_on_the_acrobot():
+def test_the_benchmark_targets_the_best_success_on_the_acrobot(monkeypatch):
     path = Path(__file__).resolve().parents[1] / "benchmarks" / "sample_efficiency.py"
+    monkeypatch.syspath_prepend(str(path.parent))  # its helpers, as when run as a script
     spec = importlib.util.spec_from_file_location("sample_efficiency", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
