@@ -1403,10 +1403,10 @@ by "+", or callable, default "auto"
             if self.indicator == "auto":
                 self._fit_auto(demos)
             else:
-                self._fit(demos)
+                x = self._fit(demos)
                 self.indicator_ = self.indicator
                 name = self.indicator if isinstance(self.indicator, str) else "callable"
-                self.indicator_scores_ = {name: self._dynamics_error(demos)}
+                self.indicator_scores_ = {name: self._dynamics_error(x)}
                 self.indicator_segments_ = {name: len(self.regions_)}
                 self.indicator_failures_ = {}
         self._warn_lost()
@@ -1419,16 +1419,20 @@ by "+", or callable, default "auto"
         scores: dict[str, float] = {}
         segments: dict[str, int] = {}
         failures: dict[str, str] = {}
+        # every candidate draws the same seeds (a clone each), so the kernel feature map each
+        # would fit is this one: fitted and applied once
+        seed = int(check_random_state(clone(self).random_state).randint(_SEED_MAX, size=3)[0])
+        features = self._task_space([d.observations for d in demos], seed)
         for name in _AUTO_CANDIDATES:
             candidate = clone(self).set_params(indicator=name)
             with warnings.catch_warnings(record=True) as caught:
                 try:
-                    candidate._fit(demos)
+                    x = candidate._fit(demos, features)
                 except ValueError as exc:
                     failures[name] = str(exc)
                     scores[name], segments[name] = math.inf, 0
                     continue
-            scores[name] = candidate._dynamics_error(demos)
+            scores[name] = candidate._dynamics_error(x)
             segments[name] = len(candidate.regions_)
             fits[name] = (candidate, caught)
         if not fits:
@@ -1452,15 +1456,30 @@ by "+", or callable, default "auto"
             warnings.warn(w.message, w.category, stacklevel=3)
         return self
 
-    def _dynamics_error(self, demos: list) -> float:
-        """:func:`dynamics_cv_error` of the fitted segmentation on its demonstrations."""
-        x = [self.transform_states(d.observations) for d in demos]
+    def _dynamics_error(self, x: list[np.ndarray]) -> float:
+        """:func:`dynamics_cv_error` of the fitted segmentation on its demonstrations, given in
+        task space (``_fit``'s result)."""
         shared = _shared_course_dims(x) if self.ignore_nuisance_dims else None
         if shared is not None:  # motion no demo shares is no segmentation's to explain
             x = [s[:, shared] for s in x]
         return dynamics_cv_error(x, self.switches_, self.time_scale_)
 
-    def _fit(self, demos: list) -> TransitionStateClustering:
+    def _task_space(
+        self, states: list[np.ndarray], seed: int
+    ) -> tuple[RBFFeatures | None, list[np.ndarray]]:
+        """The kernel feature map (``None`` without a kernel) and the states mapped by it."""
+        if self.kernel != "rbf":
+            return None, states
+        feature_map = self._fit_feature_map(states, seed)
+        return feature_map, [feature_map(s) for s in states]
+
+    def _fit(
+        self,
+        demos: list,
+        features: tuple[RBFFeatures | None, list[np.ndarray]] | None = None,
+    ) -> list[np.ndarray]:
+        """Fit with one indicator; return the demonstrations' states in task space.
+        ``features``: the feature map and mapped states, when already made for these seeds."""
         if isinstance(self.indicator, str):
             unknown = [n for n in self.indicator.split("+") if n not in _INDICATORS]
             if unknown:
@@ -1474,10 +1493,7 @@ by "+", or callable, default "auto"
         states = [d.observations for d in demos]
         self.n_demos_ = len(states)
         self.state_dim_ = states[0].shape[1]
-        self.feature_map_ = (
-            self._fit_feature_map(states, seeds[0]) if self.kernel == "rbf" else None
-        )
-        x = states if self.feature_map_ is None else [self.feature_map_(s) for s in states]
+        self.feature_map_, x = features or self._task_space(states, int(seeds[0]))
         # a callable indicator is the user's own method: it gets the demos as they are
         normalize = self.normalize_time and (
             isinstance(self.indicator, str) or getattr(self.indicator, "func", None) in _BUILTIN
@@ -1543,7 +1559,7 @@ by "+", or callable, default "auto"
             self._align_entries(x, reg, threshold)
         self.segments_, self.switches_ = self._segmentation(x, self.regions_)
         self._check_complete(self.segments_, x)
-        return self
+        return x
 
     def _align_entries(self, x: list[np.ndarray], reg: np.ndarray, threshold: float) -> None:
         """Build each transition region where entering it online matches the transitions.
