@@ -34,6 +34,21 @@ from swirl_wrappers.wrappers import (
 __all__ = ["SwirlDQN"]
 
 
+
+def check_state_key_covers(space: spaces.Dict, state_key: str | Sequence[str]) -> None:
+    """Raise ``ValueError`` unless the task state (``state_key``) joins every key of a Dict
+    observation (the segment's aside): SwirlDQN clones demo states into a Q-network that sees
+    the whole observation."""
+    keys = [state_key] if isinstance(state_key, str) else list(state_key)
+    missing = [key for key in space.spaces if key != SEGMENT_KEY and key not in keys]
+    if missing:
+        raise ValueError(
+            f"SwirlDQN clones the demos into the Q-network, which sees the whole Dict "
+            f"observation, but the task state (state_key={keys}) leaves out {missing}: wrap "
+            "with state_key listing every key and let the task read a part of it with "
+            "fit_task(dims=...)"
+        )
+
 class SwirlDQN(DQN):
     """DQN on a SWIRL proxy task, initialised by per-segment behavioural cloning (paper §7.2).
 
@@ -340,14 +355,7 @@ class SwirlDQN(DQN):
         if not isinstance(space, spaces.Dict):
             raise ValueError(f"SwirlDQN needs a flat Box or a Dict observation, got {space}")
         keys = self._state_keys()
-        missing = [key for key in space.spaces if key != SEGMENT_KEY and key not in keys]
-        if missing:
-            raise ValueError(
-                f"SwirlDQN clones the demos into the Q-network, which sees the whole Dict "
-                f"observation, but the task state (state_key={list(keys)}) leaves out "
-                f"{missing}: wrap with state_key listing every key and let the task read a "
-                "part of it with fit_task(dims=...)"
-            )
+        check_state_key_covers(space, keys)
         return state_space(space, keys)[0]
 
     def _state_keys(self) -> tuple[str, ...]:

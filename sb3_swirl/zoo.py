@@ -461,7 +461,11 @@ def check_config(
             allowed = set(inspect.signature(SwirlTaskWrapper).parameters) - {"env"}
             _check_keys(f"{where}, SwirlTaskWrapper", spec, allowed)
             with _reraise_in(where):
-                SwirlTaskWrapper(env, **spec)
+                wrapped = SwirlTaskWrapper(env, **spec)
+                if algo == "swirl_dqn" and isinstance(env.observation_space, gym.spaces.Dict):
+                    from sb3_swirl.dqn import check_state_key_covers
+
+                    check_state_key_covers(env.observation_space, wrapped.state_key)
     finally:
         env.close()
     return dict(entry)

@@ -425,6 +425,25 @@ def test_comparison_methods_run_on_fetch():
     assert bc["curve"][-1]["timesteps"] == 0 and 0.0 <= bc["final_success"] <= 1.0
 
 
+def test_zoo_names_a_state_key_that_leaves_keys_out_before_training(tmp_path, monkeypatch, capsys):
+    from sb3_swirl import zoo
+
+    monkeypatch.chdir(tmp_path)
+    spec = {"demos": {"n_demos": 2, "seed": 0}, "state_key": "observation"}
+    entry = {
+        "n_timesteps": 100,
+        "policy": "MultiInputPolicy",
+        "env_wrapper": [{"sb3_swirl.zoo.SwirlTaskWrapper": spec | {"fit": {"indicator": "gmm"}}}],
+    }
+    (tmp_path / "mine.yml").write_text(yaml.safe_dump({_ids("Reach"): entry}))
+    args = ["train", "--algo", "swirl_dqn", "--env", _ids("Reach"), "-conf", "mine.yml"]
+    assert zoo.main([*args, "-f", "logs"]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "mine.yml, entry 'sb3_swirl/FetchReachDiscrete-v0': SwirlDQN clones" in err
+    assert "leaves out ['achieved_goal', 'desired_goal']" in err
+    assert not (tmp_path / "logs").exists()  # nothing started
+
+
 def test_zoo_trains_and_enjoys_swirl_dqn_on_fetch_reach(tmp_path, zoo_cli):
     """The entry's env_kwargs (goal_offset) reach the zoo's evaluation env and `enjoy` too
     (rl_zoo3 gives them to the training env only), and VecNormalize's statistics are saved."""
