@@ -265,6 +265,13 @@ _RATE_WHY = (
 _LENGTH_WHY = "incomplete, or at another rate? An incomplete demo can hide or merge segments"
 
 
+def joined_state_note(widths: Mapping[str, int]) -> str:
+    """`` (observation 25 + achieved_goal 3 + desired_goal 3, joined in this order)``: what a
+    demo state of a Dict observation holds, for the messages of :func:`check_demos_fit_spaces`."""
+    parts = " + ".join(f"{key} {width}" for key, width in widths.items())
+    return f" ({parts}, joined in this order: record the demos with the same state_key)"
+
+
 def check_demos_fit_spaces(
     demos: Sequence[Demonstration],
     state_dim: int,

@@ -16,7 +16,12 @@ from stable_baselines3.dqn.policies import DQNPolicy
 from torch.nn import functional as F
 
 from sb3_swirl.buffers import DictNStepReplayBuffer
-from sb3_swirl.demos import Demonstration, as_demonstrations, check_demos_fit_spaces
+from sb3_swirl.demos import (
+    Demonstration,
+    as_demonstrations,
+    check_demos_fit_spaces,
+    joined_state_note,
+)
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.inverse_dynamics import InverseDynamics
 from sb3_swirl.vec_env import get_swirl_attr, same_task
@@ -34,7 +39,6 @@ from swirl_wrappers.wrappers import (
 __all__ = ["SwirlDQN"]
 
 
-
 def check_state_key_covers(space: spaces.Dict, state_key: str | Sequence[str]) -> None:
     """Raise ``ValueError`` unless the task state (``state_key``) joins every key of a Dict
     observation (the segment's aside): SwirlDQN clones demo states into a Q-network that sees
@@ -48,6 +52,7 @@ def check_state_key_covers(space: spaces.Dict, state_key: str | Sequence[str]) -
             "with state_key listing every key and let the task read a part of it with "
             "fit_task(dims=...)"
         )
+
 
 class SwirlDQN(DQN):
     """DQN on a SWIRL proxy task, initialised by per-segment behavioural cloning (paper §7.2).
@@ -323,13 +328,16 @@ class SwirlDQN(DQN):
                 "a demo holds one state a step. Train without VecFrameStack, or without "
                 "demonstrations"
             )
+        space = self.observation_space
         check_demos_fit_spaces(
             self.demonstrations,
             self._demo_space().shape[0],
             int(self.action_space.n),  # type: ignore[attr-defined]
             "demonstration",
             "the environment's (unlifted) observations",
-            " (demos must be states of the env under the SWIRL wrapper)",
+            joined_state_note({key: space[key].shape[0] for key in self._state_keys()})
+            if isinstance(space, spaces.Dict)
+            else " (demos must be states of the env under the SWIRL wrapper)",
         )
         unlabelled = [i for i, d in enumerate(self.demonstrations) if d.actions is None]
         if (

@@ -47,7 +47,12 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-from sb3_swirl.demos import Demonstration, check_demos_fit_spaces, load_demos
+from sb3_swirl.demos import (
+    Demonstration,
+    check_demos_fit_spaces,
+    joined_state_note,
+    load_demos,
+)
 from sb3_swirl.vec_env import get_swirl_attr, swirl_task
 from swirl_wrappers import RewardConfig, SwirlWrapper, TaskModel
 from swirl_wrappers.wrappers import StateKey, state_space
@@ -145,7 +150,8 @@ def _check_demos_fit_env(
     if isinstance(space, gym.spaces.Dict):
         state, keys = state_space(space, state_key)
         size = int(np.prod(state.shape))
-        hint = f" (the state under {[keys] if isinstance(keys, str) else list(keys)})"
+        keys = [keys] if isinstance(keys, str) else list(keys)
+        hint = joined_state_note({key: int(np.prod(space[key].shape)) for key in keys})
     else:
         size, hint = int(np.prod(space.shape)), f" ({space})"
     name = env.spec.id if env.spec is not None else "the env"

@@ -358,6 +358,10 @@ def test_state_only_demos_on_dict_observations_are_refused_when_the_model_is_bui
         SwirlDQN("MultiInputPolicy", env, demonstrations=states)  # was: inside learn()
     model = SwirlDQN("MultiInputPolicy", env, demonstrations=states, infer_actions="none")
     assert model.pretrain()["n_pairs"] == len(demos[0])
+    # demos recorded under other keys: the message breaks the env's state down by key
+    fewer = collect_demos(_ids("Reach"), 2, seed=0, state_key=KEYS[:2], goal_offset=True)
+    with pytest.raises(ValueError, match=r"have 13 dims.* have 19 \(observation 10 \+ "):
+        SwirlDQN("MultiInputPolicy", env, demonstrations=fewer)
 
 
 def test_keys_extractor_reads_only_its_keys_and_saves(tmp_path):
