@@ -41,7 +41,9 @@ def steps_per_second(
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--quick", action="store_true", help="fewer steps and repeats, 1+3 demos")
     args = parser.parse_args(argv)
     steps, repeats = (2_000, 3) if args.quick else (20_000, 7)

@@ -169,13 +169,15 @@ def summarise(rows: list[dict[str, Any]], methods: list[str]) -> None:
 
     width = max(len(g) for g in by_gen)
     print(f"\nF1 median/mean per generator; {len(rows) // len(methods)} sets")
-    print(f"{'generator':<{width}} " + " ".join(f"{m:>11}" for m in methods))
+    cols = [max(11, len(m)) for m in methods]  # a column as wide as its method's name
+    header = " ".join(f"{m:>{c}}" for m, c in zip(methods, cols, strict=True))
+    print(f"{'generator':<{width}} {header}")
     for gen in by_gen:
         cells = [
             f"{statistics.median(f1(gen, m)):.2f}/{statistics.mean(f1(gen, m)):.2f}"
             for m in methods
         ]
-        print(f"{gen:<{width}} " + " ".join(f"{c:>11}" for c in cells))
+        print(f"{gen:<{width}} " + " ".join(f"{x:>{c}}" for x, c in zip(cells, cols, strict=True)))
     synthetic = [g for g in by_gen if g != "parking"]
     print(f"\noverall, per method (worst and below 0.7: the {len(synthetic)} synthetic generators)")
     name_width = max(len(m) for m in methods)

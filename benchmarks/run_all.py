@@ -31,7 +31,9 @@ SWEEPS = {"sample_efficiency.py", "baselines.py"}
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--quick", action="store_true", help="smoke mode of each benchmark")
     parser.add_argument(
         "--with-slow",
