@@ -2,29 +2,20 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Callable
 
+from sb3_swirl.cli import integer_arg
 
-def integer(low: int) -> Callable[[str], int]:
-    """An argparse type: an integer of at least ``low``, or argparse's usage error."""
+__all__ = ["integer_arg", "run_main", "seed_arg"]
 
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {value}")
-        return value
-
-    return parse
+#: a seed numpy accepts, checked before any run
+seed_arg = integer_arg(0, 2**32, "2**32")
 
 
 def run_main(main: Callable[[], int | None]) -> int:
     """Run a script's ``main``; a bad setting or path (``ValueError``, ``OSError``,
-    ``ImportError``) is one ``error:`` line and exit status 2, as with ``sb3-swirl``."""
+    ``ImportError``) is one ``error:`` line and exit status 2, as ``sb3-swirl`` does."""
     try:
         return main() or 0
     except (ValueError, OSError, ImportError) as exc:

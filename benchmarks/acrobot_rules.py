@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
-from _cli import integer
+from _cli import integer_arg
 
 import sb3_swirl  # noqa: F401  (registers the envs)
 
@@ -36,7 +36,7 @@ RULES: dict[str, dict[str, Callable[[np.ndarray], int] | None]] = {
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--episodes", type=integer(1), default=100)
+    parser.add_argument("--episodes", type=integer_arg(1), default=100)
     args = parser.parse_args(argv)
     for env_id, rules in RULES.items():
         env = gym.make(env_id)

@@ -36,7 +36,7 @@ import statistics
 from pathlib import Path
 from typing import Any
 
-from _cli import integer, run_main
+from _cli import integer_arg, run_main, seed_arg
 
 TASKS = {
     "parking": "sb3_swirl/ParallelParking-v0",
@@ -71,12 +71,12 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", default=DEFAULT_TASKS, choices=list(TASKS))
-    parser.add_argument("--seeds", type=integer(0), nargs="+", default=[10, 11, 12, 13, 14])
+    parser.add_argument("--seeds", type=seed_arg, nargs="+", default=[10, 11, 12, 13, 14])
     # the parking cars are not goal envs (HER runs in `sb3-swirl reproduce fetch`)
     methods = [m for m in METHODS if m not in GOAL_ENV_METHODS]
     parser.add_argument("--methods", nargs="+", default=methods, choices=methods)
-    parser.add_argument("--total-timesteps", type=integer(1), default=30_000)
-    parser.add_argument("--jobs", type=integer(1), default=2, help="runs at once (local CPUs)")
+    parser.add_argument("--total-timesteps", type=integer_arg(1), default=30_000)
+    parser.add_argument("--jobs", type=integer_arg(1), default=2, help="runs at once (local CPUs)")
     parser.add_argument("--backend", default="joblib", choices=BACKENDS)
     parser.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
     parser.add_argument(

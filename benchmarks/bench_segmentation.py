@@ -45,6 +45,7 @@ import argparse
 import functools
 import json
 import math
+import os
 import statistics
 import time
 import warnings
@@ -223,11 +224,9 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     args.methods = list(dict.fromkeys(args.methods))  # a method named twice runs once
     if args.json:  # a path that cannot be written fails now, not after the fits
-        try:
-            with open(args.json, "a"):
-                pass
-        except OSError as exc:
-            parser.error(f"--json: cannot write {args.json} ({exc.strerror})")
+        folder = os.path.dirname(os.path.abspath(args.json))
+        if os.path.isdir(args.json) or not os.access(folder, os.W_OK):
+            parser.error(f"--json: cannot write {args.json} (a folder, or not a writable one)")
     seeds = SEEDS[args.split][:1] if args.quick else SEEDS[args.split]
     sets = generator_sets(seeds, args.quick)
     if not args.no_parking:

@@ -39,7 +39,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _cli import integer, run_main
+from _cli import integer_arg, run_main, seed_arg
 
 from sb3_swirl.experiments import rollout_ratio, summarise_ratios, write_results
 from sb3_swirl.runner import BACKENDS, run_sweep
@@ -160,22 +160,22 @@ def print_task(
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="1 seed, 1500 steps: a smoke run")
-    parser.add_argument("--seeds", type=integer(0), nargs="+", default=[10, 11, 12, 13, 14])
+    parser.add_argument("--seeds", type=seed_arg, nargs="+", default=[10, 11, 12, 13, 14])
     parser.add_argument(
         "--tasks", nargs="+", default=["parking", "acrobot"], choices=["parking", "acrobot"]
     )
-    parser.add_argument("--jobs", type=integer(1), default=2, help="training runs at once")
+    parser.add_argument("--jobs", type=integer_arg(1), default=2, help="training runs at once")
     parser.add_argument("--backend", default="joblib", choices=BACKENDS)
     parser.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
     parser.add_argument(
         "--total-timesteps",
-        type=integer(1),
+        type=integer_arg(1),
         default=None,
         help="override the presets' step budget (the same for both methods)",
     )
     parser.add_argument(
         "--eval-freq",
-        type=integer(1),
+        type=integer_arg(1),
         default=None,
         help="override the presets' steps between evaluations (long budgets: evaluate less)",
     )

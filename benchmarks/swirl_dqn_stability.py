@@ -26,7 +26,7 @@ import warnings
 from typing import Any
 
 import numpy as np
-from _cli import integer, run_main
+from _cli import integer_arg, run_main, seed_arg
 
 
 def _parse(pairs: list[str]) -> dict[str, Any]:
@@ -146,18 +146,18 @@ def diagnose(seed: int, overrides: dict[str, Any], fit: dict[str, Any]) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=integer(0), nargs="+", default=list(range(30, 50)))
+    parser.add_argument("--seeds", type=seed_arg, nargs="+", default=list(range(30, 50)))
     parser.add_argument("--set", nargs="*", default=[], help="SwirlDQN settings, key=value")
     parser.add_argument("--fit", nargs="*", default=[], help="fit_task settings, key=value")
-    parser.add_argument("--jobs", type=integer(1), default=2)
+    parser.add_argument("--jobs", type=integer_arg(1), default=2)
     parser.add_argument(
         "--final-episodes",
-        type=integer(0),
+        type=integer_arg(0),
         default=100,
         help="score the final policy on this many more episodes too (0: only the 20 of the "
         "last evaluation)",
     )
-    parser.add_argument("--diagnose", type=integer(0), default=None, metavar="SEED")
+    parser.add_argument("--diagnose", type=seed_arg, default=None, metavar="SEED")
     parser.add_argument("--quick", action="store_true", help="two seeds, a smoke run")
     args = parser.parse_args(argv)
     if args.quick:

@@ -455,7 +455,14 @@ def _without_goal_offset(demos: Sequence[Demonstration], preset: Any) -> list[De
             "which hindsight relabelling would leave stale: swirl_her needs a task on the "
             "observation alone"
         )
-    return [dataclasses.replace(d, observations=d.observations[:, :-size]) for d in demos]
+    return [
+        dataclasses.replace(
+            d,
+            observations=d.observations[:, :-size],
+            state_key=None if d.state_key is None else d.state_key[:-1],
+        )
+        for d in demos
+    ]
 
 
 def _fit_bc(

@@ -35,19 +35,23 @@ def _dims(text: str) -> list[int]:
 
 
 def _env_kwarg(text: str) -> tuple[str, Any]:
-    """``--env-kwarg observation_dims=[6,7,8]``: a setting of ``gym.make``, its value JSON (or a
-    plain string)."""
+    """``--env-kwarg observation_dims=[6,7,8]``: a setting of ``gym.make``, its value JSON or a
+    Python literal (``true``, ``False``, ``None``, ``.5``, ``(6, 7)``), else a plain string."""
+    import ast
     import json
 
     key, sep, value = text.partition("=")
-    if not sep or not key.strip().isidentifier():
+    key = key.strip()
+    if not sep or not key.isidentifier():
         raise argparse.ArgumentTypeError(
             f"expected NAME=VALUE (e.g. goal_offset=true), got {text!r}"
         )
-    try:
-        return key.strip(), json.loads(value)
-    except json.JSONDecodeError:
-        return key.strip(), value
+    for parse in (json.loads, ast.literal_eval):
+        try:
+            return key, parse(value)
+        except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
+            continue
+    return key, value
 
 
 def _angles(text: str) -> list[list[int]]:
@@ -58,26 +62,30 @@ def _angles(text: str) -> list[list[int]]:
     return groups
 
 
-def _seed(text: str) -> int:
-    """``--seed``: an integer numpy accepts as a seed."""
-    try:
-        seed = int(text)
-    except ValueError:
-        seed = -1
-    if not 0 <= seed < 2**32:
-        raise argparse.ArgumentTypeError(f"expected an integer in [0, 2**32), got {text!r}")
-    return seed
+def integer_arg(
+    low: int, high: int | None = None, shown: str | None = None
+) -> Callable[[str], int]:
+    """An argparse type: an integer in ``[low, high)`` (``high`` None: no bound), or argparse's
+    usage error saying ``expected an integer >= low`` (or ``in [low, shown)``). The benchmark
+    scripts use it too."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < low or (high is not None and value >= high):
+            bound = f">= {low}" if high is None else f"in [{low}, {shown or high})"
+            raise argparse.ArgumentTypeError(f"expected an integer {bound}, got {text!r}")
+        return value
+
+    return parse
 
 
-def _positive(text: str) -> int:
-    """``--jobs``, ``-n``: an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
-    return value
+#: ``--seed``: an integer numpy accepts as a seed
+_seed = integer_arg(0, 2**32, "2**32")
+#: ``--jobs``, ``-n``: an integer >= 1
+_positive = integer_arg(1)
 
 
 def _n_demos(text: str) -> int:
@@ -125,17 +133,12 @@ def _cmd_demos(args: argparse.Namespace) -> int:
 
     _check_output(args.output)
     console.print(f"collecting {args.n} demos of {args.env_id}")
-    state_key = None if args.state_key is None else [k for k in args.state_key.split(",") if k]
+    state_key = None if args.state_key is None else args.state_key.split(",")
+    if state_key is not None and not all(key.strip() for key in state_key):
+        raise ValueError(f"--state-key: an empty key in {args.state_key!r}")
     env_kwargs = dict(args.env_kwarg)
-    if env_kwargs:  # a setting the env does not take is named here, not in a traceback
-        import gymnasium as gym
-
-        try:
-            gym.make(args.env_id, **env_kwargs).close()
-        except TypeError as exc:
-            raise ValueError(
-                f"--env-kwarg: {args.env_id} does not take {env_kwargs}: {exc}"
-            ) from None
+    if len(env_kwargs) < len(args.env_kwarg):
+        raise ValueError("--env-kwarg: a setting given twice")
     demos = collect_demos(
         args.env_id,
         args.n,
@@ -227,12 +230,14 @@ def _print_near_ties(kept: str, scores: dict, segments: dict) -> None:
         ):
             close.setdefault(segments[name], []).append(name)
     for count, names in close.items():
-        gap = max(scores[name] for name in names) / scores[kept] - 1
+        names.sort(key=scores.__getitem__)  # the closest first: the one to try
+        worst = scores[names[-1]] - scores[kept]
+        gap = worst / scores[kept] if scores[kept] > 0 else 0.0
         console.print(
             f"  {' and '.join(names)} explain{'s' * (len(names) == 1)} the demos nearly as well "
-            f"(within {100 * gap:.1f}%) with {count} segment{'s' * (count != 1)} against "
+            f"(within {100 * gap:.2g}%) with {count} segment{'s' * (count != 1)} against "
             f"{segments[kept]}: the "
-            f"demos barely decide between them; to compare, fit with --indicator {names[-1]} "
+            f"demos barely decide between them; to compare, fit with --indicator {names[0]} "
             "and look at both with `sb3-swirl show TASK --plot DIR --demos DEMOS`"
         )
 

@@ -38,11 +38,16 @@ class Demonstration:
     observations : array of shape (T + 1, d)
     actions : array of shape (T,) or (T, action_dim), optional
     rewards : array of shape (T,), optional
+    state_key : tuple of str, optional
+        For the states of a ``Dict`` observation, the keys whose values each state joins, in
+        order (``collect_demos(..., state_key=...)`` records them): a SWIRL wrapper, SwirlDQN
+        and the zoo refuse, or warn about, another order. ``None``: not recorded.
     """
 
     observations: np.ndarray
     actions: np.ndarray | None = None
     rewards: np.ndarray | None = None
+    state_key: tuple[str, ...] | None = None
 
     def __len__(self) -> int:
         """Number of transitions ``T``."""
@@ -91,13 +96,16 @@ def _first_bad_step(arr: np.ndarray) -> int | None:
 
 def _to_demonstration(item: Any, i: int) -> Demonstration:
     """Convert one item (array, Demonstration, imitation or Minari episode) and check it."""
+    key = None
     if isinstance(item, Demonstration):
-        obs, acts, rews = item.observations, item.actions, item.rewards
+        obs, acts, rews, key = item.observations, item.actions, item.rewards, item.state_key
     else:
         has_obs, obs = _field(item, ("obs", "observations"))
         if has_obs:
             acts = _field(item, ("acts", "actions"))[1]
             rews = _field(item, ("rews", "rewards"))[1]
+            if isinstance(item, Mapping):
+                key = item.get("state_key")
         elif isinstance(item, Mapping):
             raise ValueError(
                 f"demo {i} is a mapping without 'observations' or 'obs' (its keys: "
@@ -157,7 +165,12 @@ def _to_demonstration(item: Any, i: int) -> Demonstration:
         if bad is not None:
             raise ValueError(f"demo {i}: rewards contain NaN or inf (first at step {bad})")
         rews = rews.astype(np.float64)
-    return Demonstration(np.array(obs, dtype=np.float64), acts, rews)
+    if key is not None:
+        keys = (key,) if isinstance(key, str) else tuple(key)
+        if not keys or not all(isinstance(k, str) for k in keys):
+            raise ValueError(f"demo {i}: state_key must be a key or a list of keys, got {key!r}")
+        key = keys
+    return Demonstration(np.array(obs, dtype=np.float64), acts, rews, key)
 
 
 def as_demonstrations(data: Any, window: int | None = None) -> list[Demonstration]:
@@ -215,6 +228,13 @@ def as_demonstrations(data: Any, window: int | None = None) -> list[Demonstratio
             raise ValueError(
                 f"demo {i} has state dimension {demo.observations.shape[1]} but demo 0 has {dim}"
             )
+    keyed = [(i, demo.state_key) for i, demo in enumerate(demos) if demo.state_key is not None]
+    for i, keys in keyed[1:]:
+        if keys != keyed[0][1]:
+            raise ValueError(
+                f"demo {i} joins the keys {list(keys)} but demo {keyed[0][0]} "
+                f"{list(keyed[0][1])}: record every demo with the same state_key"
+            )
     shapes = [(i, demo.actions.shape) for i, demo in enumerate(demos) if demo.actions is not None]
     for i, shape in shapes[1:]:
         if shape[1:] != shapes[0][1][1:]:
@@ -265,9 +285,48 @@ _RATE_WHY = (
 _LENGTH_WHY = "incomplete, or at another rate? An incomplete demo can hide or merge segments"
 
 
+def check_demos_state_key(
+    demos: Sequence[Demonstration], state_key: str | Sequence[str], source: str
+) -> None:
+    """Raise unless every demo that records its ``state_key`` joined the same keys, in the same
+    order, as the wrapper's: two keys of one width swapped would pass every other check.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+    state_key : str or sequence of str
+        The wrapper's ``state_key``.
+    source : str
+        How the messages name a demo (``"demonstration"``: "demonstration 3 joins ...").
+
+    Raises
+    ------
+    ValueError
+        Naming the first demo that joined other keys, and both orders.
+    """
+    keys = (state_key,) if isinstance(state_key, str) else tuple(state_key)
+    for i, demo in enumerate(demos):
+        if demo.state_key is not None and demo.state_key != keys:
+            raise ValueError(
+                f"{source} {i} joins the keys {list(demo.state_key)}, in that order, but the "
+                f"env's state joins {list(keys)}: record the demos with the same state_key"
+            )
+
+
 def joined_state_note(widths: Mapping[str, int]) -> str:
-    """`` (observation 25 + achieved_goal 3 + desired_goal 3, joined in this order)``: what a
-    demo state of a Dict observation holds, for the messages of :func:`check_demos_fit_spaces`."""
+    """What a demo state of a Dict observation holds, for :func:`check_demos_fit_spaces`.
+
+    Parameters
+    ----------
+    widths : mapping of str to int
+        Each key the state joins, in order, and its width.
+
+    Returns
+    -------
+    str
+        E.g. ``" (observation 25 + achieved_goal 3 + desired_goal 3, joined in this order:
+        record the demos with the same state_key)"``.
+    """
     parts = " + ".join(f"{key} {width}" for key, width in widths.items())
     return f" ({parts}, joined in this order: record the demos with the same state_key)"
 
@@ -434,8 +493,8 @@ def _rate_ratios(states: Sequence[np.ndarray], spread: np.ndarray) -> np.ndarray
 def save_demos(demos: Any, path: str | os.PathLike) -> None:
     """Write demonstrations to an uncompressed ``.npz`` file (exact round trip).
 
-    Demonstration ``i`` is stored under ``obs_i`` and, when present, ``acts_i`` and ``rews_i``,
-    so ragged lengths need no padding.
+    Demonstration ``i`` is stored under ``obs_i`` and, when present, ``acts_i``, ``rews_i`` and
+    ``keys_i`` (its ``state_key``), so ragged lengths need no padding.
 
     Parameters
     ----------
@@ -463,6 +522,8 @@ def save_demos(demos: Any, path: str | os.PathLike) -> None:
             arrays[f"acts_{i}"] = demo.actions
         if demo.rewards is not None:
             arrays[f"rews_{i}"] = demo.rewards
+        if demo.state_key is not None:
+            arrays[f"keys_{i}"] = np.array(demo.state_key)
     with atomic_write(path, "wb") as fh:  # a failure leaves the previous file
         np.savez(fh, **arrays)
 
@@ -538,7 +599,7 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
                 "a damaged or hand-edited file?"
             )
         expected = {"format", "n_demos"} | {
-            f"{field}_{i}" for i in range(n) for field in ("obs", "acts", "rews")
+            f"{field}_{i}" for i in range(n) for field in ("obs", "acts", "rews", "keys")
         }
         if files - expected:
             raise ValueError(
@@ -554,6 +615,9 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
                     "observations": read(f"obs_{i}"),
                     "actions": read(f"acts_{i}") if f"acts_{i}" in files else None,
                     "rewards": read(f"rews_{i}") if f"rews_{i}" in files else None,
+                    "state_key": [str(k) for k in read(f"keys_{i}").tolist()]
+                    if f"keys_{i}" in files
+                    else None,
                 }
             )
     try:

@@ -20,6 +20,7 @@ from sb3_swirl.demos import (
     Demonstration,
     as_demonstrations,
     check_demos_fit_spaces,
+    check_demos_state_key,
     joined_state_note,
 )
 from sb3_swirl.features import RBFFeaturesExtractor
@@ -40,9 +41,21 @@ __all__ = ["SwirlDQN"]
 
 
 def check_state_key_covers(space: spaces.Dict, state_key: str | Sequence[str]) -> None:
-    """Raise ``ValueError`` unless the task state (``state_key``) joins every key of a Dict
-    observation (the segment's aside): SwirlDQN clones demo states into a Q-network that sees
-    the whole observation."""
+    """Raise unless the task state joins every key of a Dict observation (the segment's aside):
+    SwirlDQN clones demo states into a Q-network that sees the whole observation.
+
+    Parameters
+    ----------
+    space : gymnasium.spaces.Dict
+        The (lifted or unlifted) observation space.
+    state_key : str or sequence of str
+        The wrapper's ``state_key``.
+
+    Raises
+    ------
+    ValueError
+        Naming the keys ``state_key`` leaves out.
+    """
     keys = [state_key] if isinstance(state_key, str) else list(state_key)
     missing = [key for key in space.spaces if key != SEGMENT_KEY and key not in keys]
     if missing:
@@ -329,6 +342,8 @@ class SwirlDQN(DQN):
                 "demonstrations"
             )
         space = self.observation_space
+        if isinstance(space, spaces.Dict):
+            check_demos_state_key(self.demonstrations, self._state_keys(), "demonstration")
         check_demos_fit_spaces(
             self.demonstrations,
             self._demo_space().shape[0],

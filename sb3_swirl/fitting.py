@@ -252,6 +252,8 @@ def fit_task(
         "n_demos": len(demos),
         "demo_lengths": {"min": min(lengths), "max": max(lengths), "mean": float(np.mean(lengths))},
         "state_dim": state_dim,
+        # the Dict observation keys the demos' states join, in order (None: not recorded)
+        "state_key": next((list(d.state_key) for d in raw_demos if d.state_key), None),
         "dims": None if dims is None else list(dims),
         "angles": None if angles is None else [list(a) for a in angles],
         "random_state": _jsonable(random_state),

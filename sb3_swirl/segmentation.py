@@ -1419,10 +1419,14 @@ by "+", or callable, default "auto"
         scores: dict[str, float] = {}
         segments: dict[str, int] = {}
         failures: dict[str, str] = {}
-        # every candidate draws the same seeds (a clone each), so the kernel feature map each
-        # would fit is this one: fitted and applied once
-        seed = int(check_random_state(clone(self).random_state).randint(_SEED_MAX, size=3)[0])
-        features = self._task_space([d.observations for d in demos], seed)
+        # with a seed (an int, a RandomState) every candidate draws the same seeds (a clone
+        # each), so the kernel feature map each would fit is this one: fitted and applied once
+        # (with random_state=None the candidates now share one map where each drew its own)
+        features = None
+        if self.kernel == "rbf":
+            rs = check_random_state(clone(self).random_state)
+            seed = int(rs.randint(_SEED_MAX, size=3)[0])
+            features = self._task_space([d.observations for d in demos], seed)
         for name in _AUTO_CANDIDATES:
             candidate = clone(self).set_params(indicator=name)
             with warnings.catch_warnings(record=True) as caught:

@@ -50,6 +50,7 @@ import yaml
 from sb3_swirl.demos import (
     Demonstration,
     check_demos_fit_spaces,
+    check_demos_state_key,
     joined_state_note,
     load_demos,
 )
@@ -151,6 +152,7 @@ def _check_demos_fit_env(
         state, keys = state_space(space, state_key)
         size = int(np.prod(state.shape))
         keys = [keys] if isinstance(keys, str) else list(keys)
+        check_demos_state_key(demos, keys, f"{source}, demo")
         hint = joined_state_note({key: int(np.prod(space[key].shape)) for key in keys})
     else:
         size, hint = int(np.prod(space.shape)), f" ({space})"
@@ -467,11 +469,13 @@ def check_config(
             allowed = set(inspect.signature(SwirlTaskWrapper).parameters) - {"env"}
             _check_keys(f"{where}, SwirlTaskWrapper", spec, allowed)
             with _reraise_in(where):
-                wrapped = SwirlTaskWrapper(env, **spec)
                 if algo == "swirl_dqn" and isinstance(env.observation_space, gym.spaces.Dict):
                     from sb3_swirl.dqn import check_state_key_covers
 
-                    check_state_key_covers(env.observation_space, wrapped.state_key)
+                    # before the wrapper collects demos and fits
+                    keys = state_space(env.observation_space, spec.get("state_key"))[1]
+                    check_state_key_covers(env.observation_space, keys)
+                SwirlTaskWrapper(env, **spec)
     finally:
         env.close()
     return dict(entry)

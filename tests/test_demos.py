@@ -90,20 +90,35 @@ def test_npz_round_trip_is_exact(tmp_path):
         Demonstration(rng.normal(size=(8, 2))),
         Demonstration(rng.normal(size=(5, 2)), np.array([0, 3, 1, 2], dtype=np.int64)),
         Demonstration(rng.normal(size=(4, 2)), rng.normal(size=3), rng.normal(size=3)),
+        Demonstration(rng.normal(size=(4, 2)), state_key=("observation", "desired_goal")),
     ]
     path = tmp_path / "demos.npz"
     with pytest.raises(TypeError, match="demos first"):
         save_demos(path, demos)
     save_demos(demos, path)
     for loaded in (load_demos(path), as_demonstrations(path), as_demonstrations(str(path))):
-        assert len(loaded) == 3
+        assert len(loaded) == 4
         for a, b in zip(demos, loaded, strict=True):
+            assert a.state_key == b.state_key
             np.testing.assert_array_equal(a.observations, b.observations)
             for x, y in ((a.actions, b.actions), (a.rewards, b.rewards)):
                 assert (x is None) == (y is None)
                 if x is not None:
                     assert x.dtype == y.dtype
                     np.testing.assert_array_equal(x, y)
+
+
+def test_demos_that_join_other_keys_are_refused():
+    a = Demonstration(np.zeros((5, 2)), state_key=("observation", "desired_goal"))
+    b = Demonstration(np.ones((5, 2)), state_key=("desired_goal", "observation"))
+    with pytest.raises(ValueError, match=r"demo 1 joins the keys \['desired_goal', 'observation'"):
+        as_demonstrations([a, b])
+    with pytest.raises(ValueError, match="demo 0: state_key must be a key or a list of keys"):
+        as_demonstrations([{"observations": np.zeros((5, 2)), "state_key": [3]}, b])
+    one = as_demonstrations(
+        [{"observations": np.zeros((5, 2)), "state_key": "obs"}, b.observations]
+    )
+    assert one[0].state_key == ("obs",) and one[1].state_key is None  # not recorded: not checked
 
 
 def test_load_rejects_foreign_and_missing_files(tmp_path):

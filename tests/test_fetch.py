@@ -21,6 +21,7 @@ import sb3_swirl.envs  # noqa: F401  (registers the ids)
 from sb3_swirl import KeysExtractor, SwirlDQN, collect_demos, fit_task
 from sb3_swirl.baselines import run_method
 from sb3_swirl.buffers import DictNStepReplayBuffer
+from sb3_swirl.demos import Demonstration
 from sb3_swirl.envs.fetch import FetchDiscreteEnv
 from sb3_swirl.experiments import PRESETS
 from sb3_swirl.supervisors import _run_episode
@@ -360,8 +361,32 @@ def test_state_only_demos_on_dict_observations_are_refused_when_the_model_is_bui
     assert model.pretrain()["n_pairs"] == len(demos[0])
     # demos recorded under other keys: the message breaks the env's state down by key
     fewer = collect_demos(_ids("Reach"), 2, seed=0, state_key=KEYS[:2], goal_offset=True)
-    with pytest.raises(ValueError, match=r"have 13 dims.* have 19 \(observation 10 \+ "):
+    with pytest.raises(ValueError, match=r"joins the keys \['observation', 'achieved_goal'\], in"):
         SwirlDQN("MultiInputPolicy", env, demonstrations=fewer)
+    unrecorded = [Demonstration(d.observations, d.actions) for d in fewer]  # plain arrays
+    with pytest.raises(ValueError, match=r"have 13 dims.* have 19 \(observation 10 \+ "):
+        SwirlDQN("MultiInputPolicy", env, demonstrations=unrecorded)
+
+
+def test_demos_and_tasks_recorded_under_another_key_order_are_caught():
+    """The two goals have one width: swapped, they pass every width check."""
+    swapped = ["observation", "desired_goal", "achieved_goal", "goal_offset"]
+    demos = collect_demos(_ids("Reach"), 2, seed=0, state_key=swapped, goal_offset=True)
+    assert demos[0].state_key == tuple(swapped)
+    env = SwirlWrapper(
+        gym.make(_ids("Reach"), goal_offset=True), _goal_task([16, 17, 18]), state_key=KEYS
+    )
+    with pytest.raises(
+        ValueError, match=r"demonstration 0 joins the keys \['observation', 'desired"
+    ):
+        SwirlDQN("MultiInputPolicy", env, demonstrations=demos)
+    task = fit_task(demos, dims=[16, 17, 18], indicator="gmm", random_state=0)
+    assert task.metadata["state_key"] == swapped
+    with pytest.warns(UserWarning, match="fitted on states that join the keys"):
+        SwirlWrapper(gym.make(_ids("Reach"), goal_offset=True), task, state_key=KEYS)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the demos' own order: no warning
+        SwirlWrapper(gym.make(_ids("Reach"), goal_offset=True), task, state_key=swapped)
 
 
 def test_keys_extractor_reads_only_its_keys_and_saves(tmp_path):

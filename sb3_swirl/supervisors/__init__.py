@@ -135,7 +135,8 @@ def collect_demos(
     ------
     ValueError
         Unknown ``env_id``, ``n`` / ``max_attempts`` not positive integers with
-        ``max_attempts >= n``, or ``return_phases`` for a supervisor without phases.
+        ``max_attempts >= n``, ``return_phases`` for a supervisor without phases, an env
+        setting the env does not take, or a ``state_key`` not in its observation space.
     RuntimeError
         If fewer than ``n`` episodes succeed within ``max_attempts``; names the failed seeds.
 
@@ -154,7 +155,10 @@ def collect_demos(
     if return_phases and not isinstance(getattr(supervisor_cls, "phase", None), property):
         raise ValueError(f"{supervisor_cls.__name__} does not plan in phases (no .phase)")
 
-    env = gym.make(env_id, **env_kwargs)
+    try:
+        env = gym.make(env_id, **env_kwargs)
+    except TypeError as exc:  # a setting the env does not take: named, not a traceback
+        raise ValueError(f"{env_id} does not take the settings {env_kwargs}: {exc}") from None
     if isinstance(env.observation_space, gym.spaces.Dict):
         state_key = "observation" if state_key is None else state_key
         try:  # an unknown key is named before any episode runs
@@ -231,6 +235,7 @@ def _run_episode(
         observations=np.asarray(states, dtype=np.float64),
         actions=np.asarray(actions, dtype=np.int64),
         rewards=np.asarray(rewards, dtype=np.float64),
+        state_key=None if state_key is None else tuple(np.atleast_1d(state_key).tolist()),
     )
     return demo, np.asarray(phases, dtype=np.int64)
 

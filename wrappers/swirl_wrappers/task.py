@@ -32,7 +32,6 @@ import json
 import math
 import numbers
 import os
-import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -726,20 +725,7 @@ class TaskModel:
         """Raise ``ValueError`` unless states of ``state_dim`` values fit this task.
 
         Wrappers call it once at construction so that the per-step functions need no checks.
-        States of another width than the fit's (``metadata["state_dim"]``, where recorded)
-        fit when the task reads only some entries, but are most likely laid out otherwise
-        (another ``state_key`` or ``observation_dims``): a ``UserWarning`` says so.
         """
-        fitted = self.metadata.get("state_dim")
-        if isinstance(fitted, int) and fitted != state_dim and self.state_entries is not None:
-            warnings.warn(
-                f"the task was fitted on states of {fitted} values and is given states of "
-                f"{state_dim}: it reads their entries {list(self.state_entries)}. If the two "
-                "are laid out otherwise (another state_key, observation_dims or env), its "
-                "regions and rewards read other quantities than the demos'; fit it on demos "
-                "recorded as these states are",
-                stacklevel=3,
-            )
         if self.state_entries is not None:
             used = max(self.state_entries)
             if state_dim <= used:

@@ -88,6 +88,7 @@ def lift_observation_space(
                 f"state_key={state_key!r} is only for Dict observation spaces; this one is a Box"
             )
         _check_state_space(space, task, "observation space")
+        _warn_other_layout(task, space.shape[0], None)
         lifted = spaces.Box(
             low=np.concatenate([space.low, np.zeros(n, dtype=space.dtype)]),
             high=np.concatenate([space.high, np.ones(n, dtype=space.dtype)]),
@@ -102,6 +103,7 @@ def lift_observation_space(
             name = f"observation space[{state_key!r}]"
         else:
             name = f"observation spaces {list(state_key)} joined"
+        _warn_other_layout(task, state.shape[0], state_key)
         _check_state_space(state, task, name)
         segment = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
         return spaces.Dict({**space.spaces, SEGMENT_KEY: segment}), state_key
@@ -171,6 +173,36 @@ def state_space(
         dtype=np.float64,
     )
     return joined, keys
+
+
+def _warn_other_layout(task: TaskModel, state_dim: int, state_key: StateKey) -> None:
+    """Warn when the wrapper's task state is laid out otherwise than the states the task was
+    fitted on, where the fit recorded them (``metadata``): another width, or another order of
+    the Dict keys (two keys of one width swapped pass every check of the spaces)."""
+    fitted_dim, fitted_keys = task.metadata.get("state_dim"), task.metadata.get("state_key")
+    if isinstance(fitted_dim, int) and fitted_dim != state_dim and task.state_entries is not None:
+        warnings.warn(
+            f"the task was fitted on states of {fitted_dim} values and is given states of "
+            f"{state_dim}: it reads their entries {list(task.state_entries)}. If the two are "
+            "laid out otherwise (another state_key, observation_dims or env), its regions and "
+            "rewards read other quantities than the demos'; fit it on demos recorded as these "
+            "states are",
+            stacklevel=4,
+        )
+    keys = (
+        None
+        if state_key is None
+        else [state_key]
+        if isinstance(state_key, str)
+        else list(state_key)
+    )
+    if isinstance(fitted_keys, list | tuple) and keys is not None and list(fitted_keys) != keys:
+        warnings.warn(
+            f"the task was fitted on states that join the keys {list(fitted_keys)}, in that "
+            f"order; this wrapper's join {keys}: its regions and rewards then read other "
+            "quantities than the demos' (pass state_key as the demos were recorded)",
+            stacklevel=4,
+        )
 
 
 def _check_state_space(space: gym.Space, task: TaskModel | None, name: str) -> None:
