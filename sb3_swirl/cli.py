@@ -401,8 +401,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="a setting of the env, its value JSON (repeatable; e.g. goal_offset=true "
-        "observation_dims=[6,7,8])",
+        help="a setting of the env, its value JSON or a Python literal (repeatable; e.g. "
+        "goal_offset=true observation_dims=[6,7,8])",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_demos)

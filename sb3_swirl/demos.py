@@ -615,7 +615,7 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
                     "observations": read(f"obs_{i}"),
                     "actions": read(f"acts_{i}") if f"acts_{i}" in files else None,
                     "rewards": read(f"rews_{i}") if f"rews_{i}" in files else None,
-                    "state_key": [str(k) for k in read(f"keys_{i}").tolist()]
+                    "state_key": [str(k) for k in np.atleast_1d(read(f"keys_{i}")).tolist()]
                     if f"keys_{i}" in files
                     else None,
                 }

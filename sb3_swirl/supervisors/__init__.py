@@ -235,7 +235,7 @@ def _run_episode(
         observations=np.asarray(states, dtype=np.float64),
         actions=np.asarray(actions, dtype=np.int64),
         rewards=np.asarray(rewards, dtype=np.float64),
-        state_key=None if state_key is None else tuple(np.atleast_1d(state_key).tolist()),
+        state_key=(state_key,) if isinstance(state_key, str) else state_key and tuple(state_key),
     )
     return demo, np.asarray(phases, dtype=np.int64)
 

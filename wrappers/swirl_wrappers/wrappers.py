@@ -103,8 +103,8 @@ def lift_observation_space(
             name = f"observation space[{state_key!r}]"
         else:
             name = f"observation spaces {list(state_key)} joined"
-        _warn_other_layout(task, state.shape[0], state_key)
         _check_state_space(state, task, name)
+        _warn_other_layout(task, state.shape[0], state_key)
         segment = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
         return spaces.Dict({**space.spaces, SEGMENT_KEY: segment}), state_key
     if isinstance(space, spaces.MultiDiscrete):
@@ -189,14 +189,8 @@ def _warn_other_layout(task: TaskModel, state_dim: int, state_key: StateKey) -> 
             "states are",
             stacklevel=4,
         )
-    keys = (
-        None
-        if state_key is None
-        else [state_key]
-        if isinstance(state_key, str)
-        else list(state_key)
-    )
-    if isinstance(fitted_keys, list | tuple) and keys is not None and list(fitted_keys) != keys:
+    keys = [state_key] if isinstance(state_key, str) else list(state_key or ())
+    if isinstance(fitted_keys, list | tuple) and keys and list(fitted_keys) != keys:
         warnings.warn(
             f"the task was fitted on states that join the keys {list(fitted_keys)}, in that "
             f"order; this wrapper's join {keys}: its regions and rewards then read other "
