@@ -69,9 +69,9 @@ def _numeric(value: Any, what: str) -> np.ndarray:
     types = sys.modules.get("imitation.data.types")  # imitation's DictObs, where it is loaded
     if isinstance(value, Mapping) or (types is not None and isinstance(value, types.DictObs)):
         raise ValueError(
-            f"{what} are a dict; join each step's values in the order of the wrapper's "
-            "state_key first (swirl_wrappers.observation_state(obs, state_key) does it for "
-            "one step), as collect_demos(..., state_key=...) records them"
+            f"{what} are a dict; pass state_key= (the wrapper's, e.g. to fit_task or "
+            "as_demonstrations) to join its values in that order, or join them yourself "
+            "(swirl_wrappers.observation_state(obs, state_key) does it for one step)"
         )
     try:
         arr = np.asarray(value)
@@ -94,8 +94,30 @@ def _first_bad_step(arr: np.ndarray) -> int | None:
     return int(np.argmax(bad)) if bad.any() else None
 
 
-def _to_demonstration(item: Any, i: int) -> Demonstration:
-    """Convert one item (array, Demonstration, imitation or Minari episode) and check it."""
+def _joined(obs: Mapping, keys: tuple[str, ...], i: int) -> np.ndarray:
+    """The values of a dict of per-key state sequences joined in the order of ``keys``."""
+    missing = [key for key in keys if key not in obs]
+    if missing:
+        raise ValueError(
+            f"demo {i}: observations have no key {missing[0]!r} of state_key {list(keys)} "
+            f"(their keys: {sorted(map(str, obs))})"
+        )
+    parts = []
+    for key in keys:
+        part = _numeric(obs[key], f"demo {i}: observations[{key!r}]")
+        part = part[:, None] if part.ndim == 1 else part
+        if part.ndim != 2 or len(part) != len(parts[0] if parts else part):
+            raise ValueError(
+                f"demo {i}: observations[{key!r}] must be a (T+1, k) array with as many rows "
+                f"as the others, got shape {part.shape}"
+            )
+        parts.append(part)
+    return np.concatenate(parts, axis=1)
+
+
+def _to_demonstration(item: Any, i: int, state_key: tuple[str, ...] | None = None) -> Demonstration:
+    """Convert one item (array, Demonstration, imitation or Minari episode) and check it;
+    dict observations are joined in the order of ``state_key`` (then recorded with it)."""
     key = None
     if isinstance(item, Demonstration):
         obs, acts, rews, key = item.observations, item.actions, item.rewards, item.state_key
@@ -123,6 +145,11 @@ def _to_demonstration(item: Any, i: int) -> Demonstration:
                         "observations, actions)"
                     ) from None
 
+    if key is not None:
+        key = _state_key_tuple(key, f"demo {i}: state_key")
+    join = key if state_key is None else state_key
+    if join is not None and isinstance(obs, Mapping):  # per-key arrays: joined in this order
+        obs, key = _joined(obs, join, i), join
     obs = _numeric(obs, f"demo {i}: observations")
     if obs.ndim != 2:
         raise ValueError(
@@ -165,15 +192,19 @@ def _to_demonstration(item: Any, i: int) -> Demonstration:
         if bad is not None:
             raise ValueError(f"demo {i}: rewards contain NaN or inf (first at step {bad})")
         rews = rews.astype(np.float64)
-    if key is not None:
-        keys = (key,) if isinstance(key, str) else tuple(key)
-        if not keys or not all(isinstance(k, str) for k in keys):
-            raise ValueError(f"demo {i}: state_key must be a key or a list of keys, got {key!r}")
-        key = keys
     return Demonstration(np.array(obs, dtype=np.float64), acts, rews, key)
 
 
-def as_demonstrations(data: Any, window: int | None = None) -> list[Demonstration]:
+def _state_key_tuple(key: Any, what: str) -> tuple[str, ...]:
+    keys = (key,) if isinstance(key, str) else tuple(key)
+    if not keys or not all(isinstance(k, str) for k in keys):
+        raise ValueError(f"{what} must be a key or a list of keys, got {key!r}")
+    return keys
+
+
+def as_demonstrations(
+    data: Any, window: int | None = None, state_key: str | Sequence[str] | None = None
+) -> list[Demonstration]:
     """Convert and validate demonstrations.
 
     Parameters
@@ -188,6 +219,11 @@ def as_demonstrations(data: Any, window: int | None = None) -> list[Demonstratio
     window : int, optional
         The transition-indicator window; each demonstration must then have at least
         ``window + 2`` states (so that two consecutive windows exist).
+    state_key : str or sequence of str, optional
+        For demos of a ``Dict`` observation given as dicts of per-key arrays (``{"observation":
+        (T+1, 25), "desired_goal": (T+1, 3), ...}``, as Minari stores them): the keys to join
+        into each state, in the order of the SWIRL wrapper's ``state_key``; recorded as each
+        demo's ``state_key``. Without it such demos are refused.
 
     Returns
     -------
@@ -221,7 +257,8 @@ def as_demonstrations(data: Any, window: int | None = None) -> list[Demonstratio
         raise ValueError("no demonstrations given")
     if len(items) < 2:
         raise ValueError(f"SWIRL needs at least 2 demonstrations, got {len(items)}")
-    demos = [_to_demonstration(item, i) for i, item in enumerate(items)]
+    keys = None if state_key is None else _state_key_tuple(state_key, "state_key")
+    demos = [_to_demonstration(item, i, keys) for i, item in enumerate(items)]
     dim = demos[0].observations.shape[1]
     for i, demo in enumerate(demos):
         if demo.observations.shape[1] != dim:

@@ -258,7 +258,7 @@ class SwirlDQN(DQN):
         )
         if demonstrations is None and self.env is not None and self.env.has_attr("demonstrations"):
             demonstrations = self.env.get_attr("demonstrations", indices=[0])[0]
-        self.demonstrations = None if demonstrations is None else as_demonstrations(demonstrations)
+        self.demonstrations: list[Demonstration] | None = None
         self._bc_done = False
         self.bc_n_pairs_ = 0
         # The lifted demo pairs of the supervised loss: saved with the model, so that training
@@ -269,6 +269,10 @@ class SwirlDQN(DQN):
         self.task_json: str | None = None
         if self.env is not None:
             self._take_task(task)
+            if demonstrations is not None:  # dict demos: joined in the wrapper's key order
+                dict_obs = isinstance(self.observation_space, spaces.Dict)
+                keys = self._state_keys() if dict_obs else None
+                self.demonstrations = as_demonstrations(demonstrations, state_key=keys)
             self._check_demonstrations()
             self._check_relabelling()
         elif _init_setup_model:
@@ -276,6 +280,8 @@ class SwirlDQN(DQN):
                 "SwirlDQN needs an environment that carries the SWIRL task: e.g. "
                 "`SwirlWrapper(gym.make(env_id), task)` or `make_swirl_env(env_id, task)`"
             )
+        elif demonstrations is not None:
+            self.demonstrations = as_demonstrations(demonstrations)
         if _init_setup_model:
             self._setup_model()
 

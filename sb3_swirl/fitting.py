@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -107,6 +107,7 @@ def fit_task(
     reward: RewardLearner | dict[str, Any] | str | None = None,
     random_state: int | None = None,
     progress: Progress | bool | None = None,
+    state_key: str | Sequence[str] | None = None,
     **kwargs: Any,
 ) -> TaskModel:
     """Learn a SWIRL proxy task (regions and local rewards) from demonstrations.
@@ -139,6 +140,10 @@ def fit_task(
     progress : callable or bool, optional
         ``progress(message)`` is called at each stage (e.g. to update a status line);
         ``True`` prints the stages.
+    state_key : str or sequence of str, optional
+        For demos of a ``Dict`` observation given as dicts of per-key arrays (Minari's
+        episodes of a goal env, say): the keys joined into the state, in the order of the
+        wrapper's ``state_key`` (:func:`~sb3_swirl.demos.as_demonstrations`).
     **kwargs
         Further hyperparameters, routed by name to the segmenter (e.g. ``window``,
         ``indicator``, ``min_demo_fraction``) or the reward learner (e.g. ``metric``).
@@ -200,7 +205,7 @@ def fit_task(
         segmenter.set_params(random_state=random_state)
 
     report("validating demonstrations")
-    demos = as_demonstrations(demos)
+    demos = as_demonstrations(demos, state_key=state_key)
     state_dim = demos[0].observations.shape[1]
     if angles is not None and dims is None:
         raise ValueError(

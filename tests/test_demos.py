@@ -121,6 +121,31 @@ def test_demos_that_join_other_keys_are_refused():
     assert one[0].state_key == ("obs",) and one[1].state_key is None  # not recorded: not checked
 
 
+def test_dict_observations_are_joined_in_the_order_of_state_key():
+    """Minari stores a goal env's episodes as dicts of per-key arrays."""
+    rng = np.random.default_rng(0)
+    episodes = [
+        {
+            "observations": {"observation": rng.normal(size=(6, 4)), "goal": rng.normal(size=6)},
+            "actions": np.arange(5) % 2,
+        }
+        for _ in range(2)
+    ]
+    demos = as_demonstrations(episodes, state_key=["goal", "observation"])
+    np.testing.assert_array_equal(
+        demos[1].observations[:, 1:], episodes[1]["observations"]["observation"]
+    )
+    np.testing.assert_array_equal(demos[1].observations[:, 0], episodes[1]["observations"]["goal"])
+    assert demos[0].state_key == ("goal", "observation")
+    with pytest.raises(ValueError, match=r"demo 0: observations have no key 'desired_goal'"):
+        as_demonstrations(episodes, state_key=["observation", "desired_goal"])
+    short = [{"observations": {"a": np.zeros((6, 2)), "b": np.zeros((5, 1))}}] * 2
+    with pytest.raises(ValueError, match=r"observations\['b'\] must be a \(T\+1, k\) array"):
+        as_demonstrations(short, state_key=["a", "b"])
+    with pytest.raises(ValueError, match="observations are a dict; pass state_key="):
+        as_demonstrations(episodes)
+
+
 def test_load_rejects_foreign_and_missing_files(tmp_path):
     path = tmp_path / "other.npz"
     np.savez(path, x=np.zeros(3))
@@ -191,8 +216,7 @@ def _bad(index, array):
         ),
         (
             _bad(2, {"observations": {"a": np.zeros((5, 2))}}),
-            "demo 2: observations are a dict; join each step's values in the order of the "
-            "wrapper's state_key",
+            "demo 2: observations are a dict; pass state_key= .* to join its values in that order",
         ),
         (
             _bad(1, {"observations": [{"a": np.zeros(2)}] * 5}),

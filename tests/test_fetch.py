@@ -389,6 +389,31 @@ def test_demos_and_tasks_recorded_under_another_key_order_are_caught():
         SwirlWrapper(gym.make(_ids("Reach"), goal_offset=True), task, state_key=swapped)
 
 
+def test_dict_demos_are_joined_in_the_wrappers_key_order():
+    demos = collect_demos(_ids("Reach"), 2, seed=0, state_key=KEYS, goal_offset=True)
+    env = SwirlWrapper(
+        gym.make(_ids("Reach"), goal_offset=True), _goal_task([16, 17, 18]), state_key=KEYS
+    )
+    widths = {"observation": 10, "achieved_goal": 3, "desired_goal": 3, "goal_offset": 3}
+    bounds = np.cumsum([0, *widths.values()])
+    as_dicts = [  # as Minari would store them: per key, in no particular order
+        {
+            "observations": {
+                key: d.observations[:, a:b]
+                for key, a, b in reversed(list(zip(widths, bounds[:-1], bounds[1:], strict=True)))
+            },
+            "actions": d.actions,
+        }
+        for d in demos
+    ]
+    model = SwirlDQN("MultiInputPolicy", env, demonstrations=as_dicts, seed=0)
+    for joined, demo in zip(model.demonstrations, demos, strict=True):
+        np.testing.assert_array_equal(joined.observations, demo.observations)
+        assert joined.state_key == tuple(KEYS)
+    task = fit_task(as_dicts, state_key=KEYS, dims=[16, 17, 18], indicator="gmm", random_state=0)
+    assert task.metadata["state_key"] == KEYS
+
+
 def test_keys_extractor_reads_only_its_keys_and_saves(tmp_path):
     """The network reads the offsets and the segment, not the absolute goals, which the env
     keeps for compute_reward and the supervisor."""
