@@ -179,6 +179,20 @@ def summarise(rows: list[dict[str, Any]], methods: list[str]) -> None:
             for m in methods
         ]
         print(f"{gen:<{width}} " + " ".join(f"{x:>{c}}" for x, c in zip(cells, cols, strict=True)))
+    # the README's table: per family (the generators of one kind of dynamics), then all sets
+    families: dict[str, list[str]] = defaultdict(list)
+    for gen in by_gen:
+        families[gen.split("/")[0]].append(gen)
+    print(f"\nF1 median/mean per family (the README's table); {len(rows) // len(methods)} sets")
+    print(f"{'family':<{width}} {header}")
+    for family, gens in [*families.items(), ("all", list(by_gen))]:
+        cells = []
+        for m in methods:
+            scores = [x for g in gens for x in f1(g, m)]
+            cells.append(f"{statistics.median(scores):.2f}/{statistics.mean(scores):.2f}")
+        print(
+            f"{family:<{width}} " + " ".join(f"{x:>{c}}" for x, c in zip(cells, cols, strict=True))
+        )
     synthetic = [g for g in by_gen if g != "parking"]
     print(f"\noverall, per method (worst and below 0.7: the {len(synthetic)} synthetic generators)")
     name_width = max(len(m) for m in methods)
