@@ -106,7 +106,7 @@ def _joined(obs: Mapping, keys: tuple[str, ...], i: int) -> np.ndarray:
     for key in keys:
         part = _numeric(obs[key], f"demo {i}: observations[{key!r}]")
         part = part[:, None] if part.ndim == 1 else part
-        if part.ndim != 2 or len(part) != len(parts[0] if parts else part):
+        if part.ndim != 2 or (parts and len(part) != len(parts[0])):
             raise ValueError(
                 f"demo {i}: observations[{key!r}] must be a (T+1, k) array with as many rows "
                 f"as the others, got shape {part.shape}"
@@ -341,7 +341,7 @@ def check_demos_state_key(
     ValueError
         Naming the first demo that joined other keys, and both orders.
     """
-    keys = (state_key,) if isinstance(state_key, str) else tuple(state_key)
+    keys = _state_key_tuple(state_key, "state_key")
     for i, demo in enumerate(demos):
         if demo.state_key is not None and demo.state_key != keys:
             raise ValueError(

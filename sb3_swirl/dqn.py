@@ -348,7 +348,8 @@ class SwirlDQN(DQN):
                 "demonstrations"
             )
         space = self.observation_space
-        if isinstance(space, spaces.Dict):
+        dict_obs = isinstance(space, spaces.Dict)
+        if dict_obs:
             check_demos_state_key(self.demonstrations, self._state_keys(), "demonstration")
         check_demos_fit_spaces(
             self.demonstrations,
@@ -357,15 +358,11 @@ class SwirlDQN(DQN):
             "demonstration",
             "the environment's (unlifted) observations",
             joined_state_note({key: space[key].shape[0] for key in self._state_keys()})
-            if isinstance(space, spaces.Dict)
+            if dict_obs
             else " (demos must be states of the env under the SWIRL wrapper)",
         )
         unlabelled = [i for i, d in enumerate(self.demonstrations) if d.actions is None]
-        if (
-            unlabelled
-            and self.infer_actions == "inverse_dynamics"
-            and isinstance(self.observation_space, spaces.Dict)
-        ):
+        if unlabelled and self.infer_actions == "inverse_dynamics" and dict_obs:
             raise ValueError(
                 f"demonstrations {unlabelled} have no actions, and inferring them needs a flat "
                 "Box observation: on Dict observations give demos with actions (or "
