@@ -18,6 +18,7 @@ from torch.nn import functional as F
 from sb3_swirl.buffers import DictNStepReplayBuffer
 from sb3_swirl.demos import (
     Demonstration,
+    _state_key_tuple,
     as_demonstrations,
     check_demos_fit_spaces,
     check_demos_state_key,
@@ -56,7 +57,7 @@ def check_state_key_covers(space: spaces.Dict, state_key: str | Sequence[str]) -
     ValueError
         Naming the keys ``state_key`` leaves out.
     """
-    keys = [state_key] if isinstance(state_key, str) else list(state_key)
+    keys = list(_state_key_tuple(state_key, "state_key"))
     missing = [key for key in space.spaces if key != SEGMENT_KEY and key not in keys]
     if missing:
         raise ValueError(
@@ -64,6 +65,27 @@ def check_state_key_covers(space: spaces.Dict, state_key: str | Sequence[str]) -
             f"observation, but the task state (state_key={keys}) leaves out {missing}: wrap "
             "with state_key listing every key and let the task read a part of it with "
             "fit_task(dims=...)"
+        )
+
+
+def check_discrete_actions(space: spaces.Space) -> None:
+    """Raise unless ``space`` is ``Discrete``: SwirlDQN is a DQN.
+
+    Parameters
+    ----------
+    space : gymnasium.spaces.Space
+        The env's action space.
+
+    Raises
+    ------
+    ValueError
+        Naming the space and the algorithms that take it.
+    """
+    if not isinstance(space, spaces.Discrete):
+        raise ValueError(
+            f"SwirlDQN needs discrete actions (it is a DQN), and the env has {space}: train "
+            "another SB3 algorithm (SAC, TD3, PPO) on the same SWIRL wrapper, without the BC "
+            "start"
         )
 
 
@@ -215,13 +237,8 @@ class SwirlDQN(DQN):
         )
         InverseDynamics.from_kwargs(inverse_dynamics_kwargs)  # bad settings fail now
         self.inverse_dynamics_kwargs = dict(inverse_dynamics_kwargs or {})
-        actions = getattr(env, "action_space", None)  # an id: SB3 makes the env and checks
-        if actions is not None and not isinstance(actions, spaces.Discrete):
-            raise ValueError(
-                f"SwirlDQN needs discrete actions (it is a DQN), and the env has {actions}: "
-                "train another SB3 algorithm (SAC, TD3, PPO) on the same SwirlWrapper, without "
-                "the BC start"
-            )
+        if hasattr(env, "action_space"):  # an id: SB3 makes the env and checks
+            check_discrete_actions(env.action_space)
         if prefill_replay and optimize_memory_usage:
             raise ValueError(
                 "prefill_replay needs a replay buffer without optimize_memory_usage: the "
@@ -386,8 +403,7 @@ class SwirlDQN(DQN):
 
     def _state_keys(self) -> tuple[str, ...]:
         assert self.env is not None
-        key = get_swirl_attr(self.env, "state_key")
-        return (key,) if isinstance(key, str) else tuple(key)
+        return _state_key_tuple(get_swirl_attr(self.env, "state_key"), "state_key")
 
     def _as_observations(self, states: np.ndarray) -> Any:
         """Demo states as (unlifted) observations: Dict observations split by key."""

@@ -459,12 +459,11 @@ def check_config(
         return dict(entry)
     env = gym.make(env_id, **(entry.get("env_kwargs") or {}))
     try:
-        if algo == "swirl_dqn" and not isinstance(env.action_space, gym.spaces.Discrete):
-            raise ValueError(
-                f"{where}: swirl_dqn needs discrete actions (SwirlDQN is a DQN), and {env_id} "
-                f"has {env.action_space}: train another algorithm (sac, td3, ppo) with the "
-                "SwirlTaskWrapper"
-            )
+        if algo == "swirl_dqn":
+            from sb3_swirl.dqn import check_discrete_actions
+
+            with _reraise_in(where):
+                check_discrete_actions(env.action_space)
         for spec in specs:
             allowed = set(inspect.signature(SwirlTaskWrapper).parameters) - {"env"}
             _check_keys(f"{where}, SwirlTaskWrapper", spec, allowed)

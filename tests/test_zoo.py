@@ -195,7 +195,7 @@ def test_yaml_for_a_plain_gymnasium_env_with_a_demo_file(tmp_path, monkeypatch):
         ({"env_wrapper": None}, "swirl_dqn needs the SWIRL task"),
         ({"terminate_on_completion": True}, "terminate_on_completion cannot be used in the zoo"),
         ({"fit": 0.1}, "SwirlTaskWrapper fit: expected a mapping of settings"),
-        ({"env": "MountainCarContinuous-v0"}, "swirl_dqn needs discrete actions"),
+        ({"env": "MountainCarContinuous-v0"}, "SwirlDQN needs discrete actions"),
         ({"frame_stack": 2}, "frame_stack: swirl_dqn clones the demos' single states"),
     ],
 )
