@@ -18,6 +18,8 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from swirl_wrappers._validation import check_int, check_option
 
 __all__ = ["BACKENDS", "run_sweep"]
@@ -28,6 +30,16 @@ BACKENDS = ("joblib", "ray")
 
 def _key(job: Mapping[str, Any]) -> str:
     return json.dumps(job, sort_keys=True, default=str)
+
+
+def _jsonable(value: Any) -> Any:
+    """numpy numbers and arrays as JSON numbers and lists; anything else is refused by name."""
+    if isinstance(value, np.generic | np.ndarray):
+        return value.tolist()
+    raise TypeError(
+        f"run results must be JSON: got a {type(value).__name__} ({value!r:.60}); return "
+        "numbers, strings, lists and dicts"
+    )
 
 
 def _call(function: Callable[..., Any], job: Mapping[str, Any]) -> tuple[dict, Any]:
@@ -204,7 +216,7 @@ def run_sweep(
         task = bar.add_task(f"{len(pending)} runs ({len(done)} done before)", total=len(pending))
         for job, result in runs:
             record = {"job": job, "result": result} | ({} if stamp is None else {"stamp": stamp})
-            line = json.dumps(record, default=str)
+            line = json.dumps(record, default=_jsonable)
             # opened per run: a backend that fails to start leaves no empty file behind
             with path.open("a") as fh:
                 fh.write(line + "\n")

@@ -143,3 +143,17 @@ def test_results_json_of_the_main_job_is_written_atomically(tmp_path, failing_wr
         experiments.write_results({"new": True}, out / "results.json")
     assert json.loads((out / "results.json").read_text()) == {"previous": True}
     assert os.listdir(out) == ["results.json"]
+
+
+def test_atomic_write_writes_through_a_link_and_refuses_a_read_only_file(tmp_path, monkeypatch):
+    (tmp_path / "real.txt").write_text("old")
+    (tmp_path / "link.txt").symlink_to(tmp_path / "real.txt")
+    with atomic_write(tmp_path / "link.txt") as fh:
+        fh.write("new")
+    assert (tmp_path / "link.txt").is_symlink() and (tmp_path / "real.txt").read_text() == "new"
+    # os.access as the file's owner would answer; a root user may write any file
+    monkeypatch.setattr(os, "access", lambda path, how: not str(path).endswith("real.txt"))
+    with pytest.raises(PermissionError, match=r"link\.txt: the file is read-only"):
+        with atomic_write(tmp_path / "link.txt") as fh:
+            fh.write("lost")
+    assert (tmp_path / "real.txt").read_text() == "new"

@@ -139,3 +139,18 @@ def test_a_runs_file_that_cannot_be_appended_to_fails_before_any_run(tmp_path, m
     with pytest.raises(ValueError, match=r"cannot write .*runs\.jsonl: no permission"):
         run_sweep(noisy, JOBS, path, progress=False)
     assert not path.exists()
+
+
+def numpy_record(seed: int) -> dict:
+    return {"n": np.int64(seed), "arr": np.arange(3), "f32": np.float32(0.5)}
+
+
+def opaque_record(seed: int) -> dict:
+    return {"path": Path("x")}
+
+
+def test_numpy_results_are_kept_as_numbers_and_others_refused(tmp_path, importable):
+    results = run_sweep(numpy_record, [{"seed": 0}], tmp_path / "a.jsonl", n_jobs=1, progress=False)
+    assert results == [{"n": 0, "arr": [0, 1, 2], "f32": 0.5}]  # not the strings '0', '[0 1 2]'
+    with pytest.raises(TypeError, match="run results must be JSON: got a PosixPath"):
+        run_sweep(opaque_record, [{"seed": 0}], tmp_path / "b.jsonl", n_jobs=1, progress=False)

@@ -29,9 +29,10 @@ def atomic_write(path: str | os.PathLike, mode: str = "w") -> Iterator[IO]:
 
     Raises
     ------
-    IsADirectoryError, NotADirectoryError, FileNotFoundError
-        If ``path`` is a folder, its folder is a file, or its folder does not exist (named,
-        before anything is written).
+    IsADirectoryError, NotADirectoryError, FileNotFoundError, PermissionError
+        If ``path`` is a folder, its folder is a file, its folder does not exist or it is a
+        read-only file (named, before anything is written). A symbolic link is written
+        through: its target gets the new content.
 
     Examples
     --------
@@ -45,13 +46,17 @@ def atomic_write(path: str | os.PathLike, mode: str = "w") -> Iterator[IO]:
     if mode not in ("w", "wb"):
         raise ValueError(f"mode must be 'w' or 'wb', got {mode!r}")
     path = os.fspath(path)
-    folder, name = os.path.split(os.path.abspath(path))
+    # a link: write its target (replacing the link by a file would cut it)
+    folder, name = os.path.split(os.path.realpath(path))
     if os.path.isdir(path):
         raise IsADirectoryError(f"cannot write {path}: it is a folder")
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise NotADirectoryError(f"cannot write {path}: {folder} is not a folder")
     if not os.path.isdir(folder):
         raise FileNotFoundError(f"cannot write {path}: the folder {folder} does not exist")
+    target = os.path.join(folder, name)
+    if os.path.exists(target) and not os.access(target, os.W_OK):
+        raise PermissionError(f"cannot write {path}: the file is read-only")
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, mode, encoding="utf-8" if mode == "w" else None) as fh:
@@ -59,7 +64,7 @@ def atomic_write(path: str | os.PathLike, mode: str = "w") -> Iterator[IO]:
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
