@@ -60,14 +60,20 @@ def _check_discount(model: Any, env: VecEnv) -> None:
 class _EpisodeTracker:
     """Per-env running sums of the true reward; a summary of each finished episode."""
 
-    def __init__(self, n_envs: int) -> None:
+    def __init__(self, n_envs: int, running: bool = False) -> None:
         self.returns = np.zeros(n_envs)
+        # episodes that began before the tracker: their summaries would be partial
+        self.partial = np.full(n_envs, running)
 
     def step(self, i: int, reward: float, done: bool, info: dict[str, Any]) -> dict | None:
         """Add a step of sub-env ``i``; ``reward`` is the true reward where ``info`` has no
-        ``"task_reward"``. Returns the episode's summary when ``done`` ends it."""
+        ``"task_reward"``. Returns the episode's summary when ``done`` ends it (``None`` for an
+        episode that began before the tracker)."""
         self.returns[i] += float(info.get("task_reward", reward))
         if not done:
+            return None
+        if self.partial[i]:
+            self.partial[i], self.returns[i] = False, 0.0
             return None
         summary = {
             "task_return": float(self.returns[i]),
@@ -91,7 +97,8 @@ class SegmentProgressCallback(BaseCallback):
     * ``swirl/task_return_mean``: mean undiscounted true return.
 
     Values are recorded when episodes end and written with SB3's normal log dumps. Episodes
-    that run on across ``learn(..., reset_num_timesteps=False)`` calls are summed whole.
+    that run on across ``learn(..., reset_num_timesteps=False)`` calls are summed whole; a new
+    callback given to such a call skips the episodes already running, which began before it.
 
     Parameters
     ----------
@@ -123,11 +130,11 @@ class SegmentProgressCallback(BaseCallback):
             task = swirl_task(self.training_env)  # none: success and return only
             self.n_segments = 0 if task is None else task.n_segments
         # learn() resets the env (a new _last_obs) unless it goes on with reset_num_timesteps=False:
-        # then the running episodes go on too
+        # then the running episodes go on too, and a new tracker skips them (it saw no start)
         n_envs = self.training_env.num_envs
         going_on = self._final_obs is not None and self.model._last_obs is self._final_obs
         if self._tracker is None or len(self._tracker.returns) != n_envs or not going_on:
-            self._tracker = _EpisodeTracker(n_envs)
+            self._tracker = _EpisodeTracker(n_envs, running=self.model.num_timesteps > 0)
 
     def _on_training_end(self) -> None:
         self._final_obs = self.model._last_obs
@@ -226,11 +233,11 @@ class TaskEvalCallback(EvalCallback):
         eval_at_start: bool = False,
     ) -> None:
         super().__init__(
-            eval_env,
+            eval_env,  # eval_freq <= 0 never evaluates, as SB3's EvalCallback
             callback_on_new_best=callback_on_new_best,
             callback_after_eval=callback_after_eval,
-            n_eval_episodes=n_eval_episodes,
-            eval_freq=eval_freq,
+            n_eval_episodes=check_int("n_eval_episodes", n_eval_episodes, low=1),
+            eval_freq=check_int("eval_freq", eval_freq),
             log_path=log_path,
             best_model_save_path=best_model_save_path,
             deterministic=deterministic,

@@ -19,8 +19,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 
 from swirl_wrappers._io import atomic_write
+from swirl_wrappers._validation import check_int
 
 _NPZ_FORMAT = "sb3_swirl.demos/1"
 # Larger observations overflow float64 when squared (covariances, quadratic rewards).
@@ -73,6 +75,8 @@ def _numeric(value: Any, what: str) -> np.ndarray:
             "as_demonstrations) to join its values in that order, or join them yourself "
             "(swirl_wrappers.observation_state(obs, state_key) does it for one step)"
         )
+    if hasattr(value, "detach") and hasattr(value, "cpu"):  # a torch tensor, maybe with grad
+        value = value.detach().cpu()
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError) as exc:
@@ -80,8 +84,8 @@ def _numeric(value: Any, what: str) -> np.ndarray:
     if arr.dtype.kind not in "biuf":
         if arr.dtype == object and arr.size and isinstance(arr.flat[0], Mapping):
             raise ValueError(
-                f"{what} are a list of dicts, one per step; join each step's values in the "
-                "order of the wrapper's state_key first (swirl_wrappers.observation_state)"
+                f"{what} are a list of dicts, one per step; pass state_key= (the wrapper's) to "
+                "join each step's values in that order"
             )
         raise ValueError(f"{what} have non-numeric dtype {arr.dtype}")
     return arr
@@ -148,6 +152,9 @@ def _to_demonstration(item: Any, i: int, state_key: tuple[str, ...] | None = Non
     if key is not None:
         key = _state_key_tuple(key, f"demo {i}: state_key")
     join = key if state_key is None else state_key
+    steps = isinstance(obs, list | tuple) and bool(obs) and isinstance(obs[0], Mapping)
+    if join is not None and steps:  # one dict a step, as env.step returns them
+        obs = {k: [step[k] if k in step else None for step in obs] for k in obs[0]}
     if join is not None and isinstance(obs, Mapping):  # per-key arrays: joined in this order
         obs, key = _joined(obs, join, i), join
     obs = _numeric(obs, f"demo {i}: observations")
@@ -196,7 +203,7 @@ def _to_demonstration(item: Any, i: int, state_key: tuple[str, ...] | None = Non
 
 
 def _state_key_tuple(key: Any, what: str) -> tuple[str, ...]:
-    keys = (key,) if isinstance(key, str) else tuple(key)
+    keys = (key,) if isinstance(key, str) else tuple(key) if isinstance(key, Iterable) else ()
     if not keys or not all(isinstance(k, str) for k in keys):
         raise ValueError(f"{what} must be a key or a list of keys, got {key!r}")
     return keys
@@ -238,6 +245,11 @@ def as_demonstrations(
         actions or rewards whose length is not T, a state dimension or an action shape
         differing between demonstrations, or a demonstration shorter than the window.
     """
+    return _as_demonstrations(data, window, state_key, minimum=2)
+
+
+def _as_demonstrations(data: Any, window: Any, state_key: Any, minimum: int) -> list[Demonstration]:
+    """:func:`as_demonstrations`; storing and exporting take a single demo (``minimum=1``)."""
     if isinstance(data, str | os.PathLike):
         data = load_demos(data)
     if isinstance(data, np.ndarray) and data.dtype.kind != "O":
@@ -255,7 +267,7 @@ def as_demonstrations(
     items = list(data)
     if not items:
         raise ValueError("no demonstrations given")
-    if len(items) < 2:
+    if len(items) < minimum:
         raise ValueError(f"SWIRL needs at least 2 demonstrations, got {len(items)}")
     keys = None if state_key is None else _state_key_tuple(state_key, "state_key")
     demos = [_to_demonstration(item, i, keys) for i, item in enumerate(items)]
@@ -283,9 +295,7 @@ def as_demonstrations(
                 + ("; for one discrete action a step, pass actions.ravel()" if column else "")
             )
     if window is not None:
-        if int(window) < 1:
-            raise ValueError(f"window must be a positive integer, got {window}")
-        check_window([demo.observations for demo in demos], int(window))
+        check_window([demo.observations for demo in demos], check_int("window", window, low=1))
     return demos
 
 
@@ -298,9 +308,15 @@ def check_window(states: Sequence[np.ndarray], window: int) -> None:
     need = window + 2
     for i, x in enumerate(states):
         if len(x) < need:
+            transposed = (
+                f"; it has more dims ({x.shape[1]}) than states: a demo holds one state per "
+                "row, shape (T+1, d); is it transposed?"
+                if x.ndim == 2 and x.shape[1] > len(x)
+                else ""
+            )
             raise ValueError(
                 f"demo {i} is shorter than the window: it has {len(x)} states, "
-                f"window={window} needs at least {need}"
+                f"window={window} needs at least {need}{transposed}"
             )
 
 
@@ -371,13 +387,14 @@ def joined_state_note(widths: Mapping[str, int]) -> str:
 def check_demos_fit_spaces(
     demos: Sequence[Demonstration],
     state_dim: int,
-    n_actions: int | None,
+    action_space: spaces.Space | None,
     source: str,
     env_note: str,
     hint: str = "",
 ) -> None:
-    """Raise unless every demo has ``state_dim`` observation dims and, where ``n_actions`` is
-    given (a ``Discrete`` action space), integer actions in ``0 .. n_actions - 1``.
+    """Raise unless every demo has ``state_dim`` observation dims and actions that fit
+    ``action_space``: integers in ``0 .. n - 1`` for ``Discrete(n)``, rows of the space's shape
+    for a ``Box`` (values outside its bounds are a :class:`DemoWarning`: the env may clip them).
 
     Messages read ``"{source} {n}: observations have 3 dims, {env_note} have 4{hint}"``.
 
@@ -386,8 +403,8 @@ def check_demos_fit_spaces(
     demos : sequence of Demonstration
     state_dim : int
         The observation dims a demo state must have.
-    n_actions : int or None
-        The size of a ``Discrete`` action space; ``None`` leaves actions unchecked.
+    action_space : gymnasium.spaces.Space or None
+        The env's action space; ``None`` or another kind of space leaves actions unchecked.
     source : str
         What a demo is called in messages (``"demonstration"``, ``"demo file x.npz, demo"``).
     env_note : str
@@ -400,36 +417,78 @@ def check_demos_fit_spaces(
     ValueError
         Naming the first demo that does not fit, the field and the problem.
     """
+    outside: dict[int, int] = {}  # demo: steps with an action outside a Box
     for n, demo in enumerate(demos):
         if demo.observations.shape[1] != state_dim:
             raise ValueError(
                 f"{source} {n}: observations have {demo.observations.shape[1]} dims, {env_note} "
                 f"have {state_dim}{hint}"
             )
-        if demo.actions is None or n_actions is None:
+        if demo.actions is None:
             continue
-        actions = np.asarray(demo.actions)
-        if actions.ndim != 1:
-            squeeze = (
-                " (one action a step: pass actions.ravel())" if actions.size == len(demo) else ""
-            )
-            raise ValueError(
-                f"{source} {n}: actions must be integers of shape ({len(demo)},) "
-                f"for the Discrete({n_actions}) action space, got shape {actions.shape}{squeeze}"
-            )
-        fractional = np.flatnonzero(actions != np.round(actions))
-        if fractional.size:
-            step = int(fractional[0])
-            raise ValueError(
-                f"{source} {n}: actions must be integers for the Discrete({n_actions}) action "
-                f"space, got {actions[step]!r} at step {step}"
-            )
-        if actions.size and (actions.min() < 0 or actions.max() >= n_actions):
-            raise ValueError(
-                f"{source} {n}: actions must lie in the action space Discrete("
-                f"{n_actions}), i.e. 0 .. {n_actions - 1}; got values in "
-                f"[{actions.min():g}, {actions.max():g}]"
-            )
+        if isinstance(action_space, spaces.Discrete):
+            _check_discrete_actions(np.asarray(demo.actions), len(demo), action_space, source, n)
+        elif isinstance(action_space, spaces.Box):
+            actions = np.asarray(demo.actions, dtype=np.float64)
+            steps = _box_actions_outside(actions, len(demo), action_space, source, n)
+            if steps:
+                outside[n] = steps
+    if outside:
+        shown = ", ".join(f"{n} ({steps} of {len(demos[n])} steps)" for n, steps in outside.items())
+        warnings.warn(
+            f"{source}s {shown}: actions lie outside the action space {action_space}. The env "
+            "may clip them, but a reward learned from the demos' actions (reward='maxent') "
+            "reads them as given: record the actions the env applied, in its units",
+            DemoWarning,
+            stacklevel=2,
+        )
+
+
+def _check_discrete_actions(
+    actions: np.ndarray, n_steps: int, space: spaces.Discrete, source: str, n: int
+) -> None:
+    n_actions = int(space.n)
+    if actions.ndim != 1:
+        squeeze = " (one action a step: pass actions.ravel())" if actions.size == n_steps else ""
+        raise ValueError(
+            f"{source} {n}: actions must be integers of shape ({n_steps},) "
+            f"for the Discrete({n_actions}) action space, got shape {actions.shape}{squeeze}"
+        )
+    fractional = np.flatnonzero(actions != np.round(actions))
+    if fractional.size:
+        step = int(fractional[0])
+        raise ValueError(
+            f"{source} {n}: actions must be integers for the Discrete({n_actions}) action "
+            f"space, got {actions[step]!r} at step {step}"
+        )
+    if actions.size and (actions.min() < 0 or actions.max() >= n_actions):
+        raise ValueError(
+            f"{source} {n}: actions must lie in the action space Discrete("
+            f"{n_actions}), i.e. 0 .. {n_actions - 1}; got values in "
+            f"[{actions.min():g}, {actions.max():g}]"
+        )
+
+
+def _box_actions_outside(
+    actions: np.ndarray, n_steps: int, space: spaces.Box, source: str, n: int
+) -> int:
+    """Raise unless ``actions`` has the shape of ``space``'s rows; return the number of steps
+    whose action lies outside its bounds (by over 1% of their width)."""
+    shape = (n_steps, *space.shape)
+    if actions.shape != shape:
+        column = (
+            " (one value a step: pass actions[:, None])"
+            if actions.shape == (n_steps,) and space.shape == (1,)
+            else ""
+        )
+        raise ValueError(
+            f"{source} {n}: actions must have shape {shape} for the action space {space}, "
+            f"got {actions.shape}{column}"
+        )
+    low, high = space.low.astype(np.float64), space.high.astype(np.float64)
+    width = np.where(np.isfinite(high - low), high - low, 0.0)
+    outside = (actions < low - 0.01 * width) | (actions > high + 0.01 * width)
+    return int(outside.reshape(n_steps, -1).any(axis=1).sum())
 
 
 def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
@@ -548,7 +607,7 @@ def save_demos(demos: Any, path: str | os.PathLike) -> None:
             f"save_demos(demos, path) takes the demos first; got the path {os.fspath(demos)!r} "
             f"first and a {type(path).__name__} second"
         )
-    demos = as_demonstrations(demos)
+    demos = _as_demonstrations(demos, None, None, minimum=1)
     arrays: dict[str, np.ndarray] = {
         "format": np.array(_NPZ_FORMAT),
         "n_demos": np.array(len(demos)),
@@ -658,7 +717,7 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
                 }
             )
     try:
-        return as_demonstrations(demos)
+        return _as_demonstrations(demos, None, None, minimum=1)
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}") from exc
 
@@ -718,7 +777,7 @@ def to_imitation(demos: Any) -> list[Any]:
     from imitation.data.types import Trajectory, TrajectoryWithRew
 
     out = []
-    for i, demo in enumerate(as_demonstrations(demos)):
+    for i, demo in enumerate(_as_demonstrations(demos, None, None, minimum=1)):
         if demo.actions is None:
             raise ValueError(f"demo {i} has no actions; imitation trajectories need actions")
         if demo.rewards is None:
@@ -762,7 +821,7 @@ def to_minari(demos: Any, dataset_id: str, env: Any = None, **kwargs: Any) -> An
         raise ImportError('to_minari needs Minari: pip install "sb3-swirl[minari]"') from exc
 
     buffers = []
-    for i, demo in enumerate(as_demonstrations(demos)):
+    for i, demo in enumerate(_as_demonstrations(demos, None, None, minimum=1)):
         if demo.actions is None:
             raise ValueError(f"demo {i} has no actions; Minari episodes need actions")
         n_steps = len(demo)

@@ -215,6 +215,28 @@ class SwirlDQN(DQN):
         inverse_dynamics_kwargs: dict[str, Any] | None = None,
         _init_setup_model: bool = True,
     ) -> None:
+        # DQN's own settings, which SB3 checks late (inside learn) or not at all
+        if not callable(learning_rate):
+            check_real("learning_rate", learning_rate, low=0.0, low_open=True)
+        for name, value, low in (
+            ("buffer_size", buffer_size, 1),
+            ("learning_starts", learning_starts, 0),
+            ("batch_size", batch_size, 1),
+            ("target_update_interval", target_update_interval, 1),
+            ("gradient_steps", gradient_steps, -1),  # -1: as many as the env steps
+        ):
+            check_int(name, value, low=low)
+        for name, value in (
+            ("gamma", gamma),
+            ("tau", tau),
+            ("exploration_fraction", exploration_fraction),
+            ("exploration_initial_eps", exploration_initial_eps),
+            ("exploration_final_eps", exploration_final_eps),
+        ):
+            check_real(name, value, low=0.0, high=1.0)
+        check_real("max_grad_norm", max_grad_norm, low=0.0, low_open=True)
+        if seed is not None:
+            check_int("seed", seed, low=0, high=2**32 - 1)
         self.bc_loss = check_option("bc_loss", bc_loss, ("margin", "cross_entropy"))
         self.bc_margin = check_real("bc_margin", bc_margin, low=0.0)
         self.bc_epochs = check_int("bc_epochs", bc_epochs, low=0)
@@ -371,7 +393,7 @@ class SwirlDQN(DQN):
         check_demos_fit_spaces(
             self.demonstrations,
             self._demo_space().shape[0],
-            int(self.action_space.n),  # type: ignore[attr-defined]
+            self.action_space,
             "demonstration",
             "the environment's (unlifted) observations",
             joined_state_note({key: space[key].shape[0] for key in self._state_keys()})
@@ -682,7 +704,15 @@ class SwirlDQN(DQN):
                 vec_norm.obs_rms.update(data["obs"])
         self._demo_data = data
         self._demo = self._demo_tensors(data)
+        if self.verbose >= 1 and self.bc_epochs:
+            print(
+                f"SwirlDQN: cloning {len(data['actions'])} demo pairs over {self.bc_epochs} "
+                "epochs (behavioural cloning) before the first env step",
+                flush=True,
+            )
         info = self._behaviour_clone()
+        if self.verbose >= 1 and self.bc_epochs:
+            print(f"SwirlDQN: BC accuracy {info['accuracy']:.3f} on the demo pairs", flush=True)
         if self.prefill_replay:
             self._prefill(data)
         if self.pretrain_td_steps:

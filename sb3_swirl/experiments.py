@@ -418,10 +418,20 @@ def train_and_evaluate(
         )
     ]
     best = max(curve, key=lambda p: p["success_rate"], default=None)
+    # the settings this run used: its own budget, not the entry's n_timesteps
+    used = {**hyperparams, "n_timesteps": total_timesteps}
+    if demos is not None and "demos" in _swirl_spec(used):  # the run's demos, not the entry's
+        spec = {**_swirl_spec(used), "demos": f"{len(demos)} demos given to the run"}
+        wrappers = used["env_wrapper"]
+        used["env_wrapper"] = [
+            {"sb3_swirl.zoo.SwirlTaskWrapper": spec}
+            if isinstance(w, dict) and "sb3_swirl.zoo.SwirlTaskWrapper" in w
+            else w
+            for w in (wrappers if isinstance(wrappers, list) else [wrappers])
+        ]
     return {
         "algo": algo,
-        # the settings this run used: its own budget, not the entry's n_timesteps
-        "hyperparams": {**hyperparams, "n_timesteps": total_timesteps},
+        "hyperparams": used,
         "curve": curve,
         "final_success": curve[-1]["success_rate"] if curve else float("nan"),
         "best_success": best["success_rate"] if best else float("nan"),

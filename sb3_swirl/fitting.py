@@ -257,6 +257,12 @@ def fit_task(
         "n_demos": len(demos),
         "demo_lengths": {"min": min(lengths), "max": max(lengths), "mean": float(np.mean(lengths))},
         "state_dim": state_dim,
+        # each dimension's range over the demos' states, for the wrapper to compare with the
+        # env's observation bounds (demos in other units or from another env)
+        "state_range": {
+            "low": np.min([d.observations.min(axis=0) for d in raw_demos], axis=0).tolist(),
+            "high": np.max([d.observations.max(axis=0) for d in raw_demos], axis=0).tolist(),
+        },
         # the Dict observation keys the demos' states join, in order (None: not recorded)
         "state_key": next((list(d.state_key) for d in raw_demos if d.state_key), None),
         "dims": None if dims is None else list(dims),

@@ -420,9 +420,19 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
             if len(demo) and np.min(demo.actions) < 0:
                 raise ValueError(
                     f"demo {i}: action {int(np.min(demo.actions))} at step "
-                    f"{int(np.argmin(demo.actions))}; discrete actions are numbered 0 .. n - 1, "
-                    "as a Discrete action space numbers them (shift labels such as -1/0/+1)"
+                    f"{int(np.argmin(demo.actions))}; actions of shape (T,) are discrete labels, "
+                    "numbered 0 .. n - 1 as a Discrete action space numbers them (shift labels "
+                    "such as -1/0/+1). For continuous actions (one value a step) give shape "
+                    "(T, 1): actions[:, None]"
                 )
+        floats = [i for i, d in enumerate(demos) if np.asarray(d.actions).dtype.kind == "f"]
+        if discrete and floats:
+            warnings.warn(
+                f"demos {floats} have float actions of shape (T,): they are read as discrete "
+                "labels 0 .. n - 1. If they are the values of a continuous action of one "
+                "dimension, give shape (T, 1): actions[:, None]",
+                stacklevel=2,
+            )
         if (
             not discrete
             and self.dynamics is not None

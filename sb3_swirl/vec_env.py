@@ -184,11 +184,12 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
 
 def same_task(a: TaskModel, b: TaskModel) -> bool:
     """Whether two tasks have the same regions and rewards, their reward settings aside: those
-    the env's wrapper pays by may differ (a model adopts them, with a warning)."""
+    the env's wrapper pays by may differ (a model adopts them, with a warning); and their
+    ``metadata`` aside, which records the fit (a later version records more)."""
     plain = RewardConfig()
     return (
-        dataclasses.replace(a, reward_config=plain).to_json()
-        == dataclasses.replace(b, reward_config=plain).to_json()
+        dataclasses.replace(a, reward_config=plain, metadata={}).to_json()
+        == dataclasses.replace(b, reward_config=plain, metadata={}).to_json()
     )
 
 

@@ -38,6 +38,7 @@ import sys
 import tempfile
 import threading
 import traceback
+import warnings
 from collections.abc import Iterator, Mapping
 from importlib.resources import files
 from pathlib import Path
@@ -157,11 +158,10 @@ def _check_demos_fit_env(
     else:
         size, hint = int(np.prod(space.shape)), f" ({space})"
     name = env.spec.id if env.spec is not None else "the env"
-    discrete = isinstance(env.action_space, gym.spaces.Discrete)
     check_demos_fit_spaces(
         demos,
         size,
-        int(env.action_space.n) if discrete else None,  # type: ignore[attr-defined]
+        env.action_space,
         f"{source}, demo",
         f"but {name}'s observations",
         hint,
@@ -436,15 +436,32 @@ def check_config(
     # rl_zoo3 passes env, seed, verbose, device and tensorboard_log itself
     passed = {"self", "env", "seed", "verbose", "device", "tensorboard_log", "_init_setup_model"}
     allowed = _ZOO_KEYS | set(inspect.signature(ALGOS[algo]).parameters) - passed
-    _check_keys("-params", overrides or {}, allowed)
+    overrides = dict(overrides or {})
+    # a tuned trial's SWIRL settings (the -optimize report's reg_covar, task_reward_weight)
+    swirl = {key: overrides.pop(key) for key in _WRAPPER_PARAMS if key in overrides}
+    _check_keys("-params", overrides, allowed | _WRAPPER_PARAMS.keys())  # for "did you mean"
     _check_keys(where, entry, allowed)
-    entry = {**entry, **(overrides or {})}
+    entry = {**entry, **overrides}
     wrappers = entry.get("env_wrapper") or []
-    specs = [
-        dict(next(iter(w.values())) or {})
-        for w in (wrappers if isinstance(wrappers, list) else [wrappers])
+    wrappers = list(wrappers) if isinstance(wrappers, list) else [wrappers]
+    ours = [
+        i
+        for i, w in enumerate(wrappers)
         if isinstance(w, Mapping) and str(next(iter(w))).endswith(".SwirlTaskWrapper")
     ]
+    specs = [dict(next(iter(wrappers[i].values())) or {}) for i in ours]
+    if swirl:
+        if not specs:
+            raise ValueError(
+                f"-params {', '.join(swirl)}: settings of the SwirlTaskWrapper, which {where} "
+                "does not have"
+            )
+        for i, spec in zip(ours, specs, strict=True):
+            for key, value in swirl.items():
+                section = _WRAPPER_PARAMS[key]
+                spec[section] = {**(spec.get(section) or {}), key: value}
+            wrappers[i] = {next(iter(wrappers[i])): spec}
+        entry["env_wrapper"] = wrappers  # what rl_zoo3 gets and saves in config.yml
     if algo == "swirl_dqn" and not specs:
         raise ValueError(
             f"{where}: swirl_dqn needs the SWIRL task: add an env_wrapper entry "
@@ -474,7 +491,14 @@ def check_config(
                     # before the wrapper collects demos and fits
                     keys = state_space(env.observation_space, spec.get("state_key"))[1]
                     check_state_key_covers(env.observation_space, keys)
-                SwirlTaskWrapper(env, **spec)
+                wrapped = SwirlTaskWrapper(env, **spec)
+            default = inspect.signature(ALGOS[algo]).parameters.get("gamma")  # ars: none
+            gamma = entry.get("gamma", default and default.default)
+            # SwirlDQN checks it itself, when it takes the env
+            if algo != "swirl_dqn" and isinstance(gamma, float | int):
+                mismatch = wrapped.reward_config.discount_mismatch(gamma, algo)
+                if mismatch:
+                    warnings.warn(f"{where}: {mismatch}", stacklevel=2)
     finally:
         env.close()
     return dict(entry)
@@ -514,6 +538,13 @@ def _train(argv: list[str]) -> int:
         config = os.fspath(shipped)
         argv = [*argv, "--conf-file", config]
         print(f"sb3-swirl: hyperparameters from {config}", flush=True)
+    elif config is None and ours:
+        print(
+            f"sb3-swirl: no {shipped.name} ships with sb3-swirl: {algo} trains with rl_zoo3's "
+            "own hyperparameters, without the SWIRL wrapper (give -conf with a SwirlTaskWrapper "
+            "entry, as in zoo_configs/swirl_dqn.yml)",
+            flush=True,
+        )
     if config is not None and algo in ALGOS:
         try:
             # import the modules that register envs, as rl_zoo3 does: the check sees their ids
@@ -545,10 +576,18 @@ def _train(argv: list[str]) -> int:
         except ValueError as exc:  # before anything trains: one clear line, no traceback
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        if _WRAPPER_PARAMS.keys() & (overrides or {}).keys():
+            argv = _wrapper_params_routed(argv, entry["env_wrapper"])
         # rl_zoo3 2.9 gives an entry's env_kwargs to the training env only (its eval env and
         # `enjoy` get those of the command line): pass them on the command line too
         if entry.get("env_kwargs") and _option(argv, "--env-kwargs") is None:
             argv = [*argv, "--env-kwargs", *(f"{k}:{v!r}" for k, v in entry["env_kwargs"].items())]
+        elif entry.get("env_kwargs"):
+            print(
+                f"sb3-swirl: --env-kwargs replaces the entry's env_kwargs {entry['env_kwargs']} "
+                "(rl_zoo3 does not merge them): repeat those you want to keep",
+                flush=True,
+            )
     try:
         with _task_saved_with_each_run():
             _run(train, "train", argv)
@@ -565,6 +604,16 @@ def _train(argv: list[str]) -> int:
         print(f"error: {str(exc) or type(exc).__name__}{hint}", file=sys.stderr)
         return 2
     return 0
+
+
+def _wrapper_params_routed(argv: list[str], wrappers: list[Any]) -> list[str]:
+    """``argv`` with ``-params reg_covar:x task_reward_weight:y`` given as the env_wrapper
+    entry that holds them (``check_config`` put them there), so that rl_zoo3 builds the
+    wrapper with them and saves them in the run's ``config.yml``."""
+    start = next(i for i, arg in enumerate(argv) if arg in ("-params", "--hyperparams")) + 1
+    end = next((i for i in range(start, len(argv)) if argv[i].startswith("-")), len(argv))
+    kept = [arg for arg in argv[start:end] if arg.split(":")[0] not in _WRAPPER_PARAMS]
+    return [*argv[:start], *kept, f"env_wrapper:{wrappers!r}", *argv[end:]]
 
 
 def _raised_in_learn(exc: BaseException) -> bool:

@@ -174,6 +174,18 @@ def test_segment_progress_keeps_episodes_that_go_on_across_learn_calls(tmp_path)
     assert returns == went_on + restarted
 
 
+def test_a_new_segment_progress_callback_skips_the_episode_already_running(tmp_path):
+    model = DQN("MlpPolicy", make_vec_env("CartPole-v1", n_envs=1, seed=0), seed=0)
+    model.learn(10)  # stopped mid-episode
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    callback = SegmentProgressCallback(window_size=1)  # joins the run: it saw no episode start
+    model.learn(150, callback=callback, log_interval=1, reset_num_timesteps=False)
+    whole = [episode["r"] for episode in model.ep_info_buffer]
+    assert callback.n_episodes == len(whole) - 1 > 0
+    returns = [float(r) for r in logged(tmp_path)["swirl/task_return_mean"]]
+    assert returns == whole[1:]  # not the first episode's last steps alone
+
+
 class NoTermPoint(PointEnv):
     """Never terminates: completion or the time limit ends the episode; 300 steps at most."""
 
@@ -323,3 +335,10 @@ def test_callbacks_warn_when_the_shaping_discounts_otherwise_than_the_agent():
 def test_segment_progress_refuses_a_bad_segment_count(n_segments):
     with pytest.raises(ValueError, match="n_segments"):
         SegmentProgressCallback(n_segments=n_segments)
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [({"n_eval_episodes": 0}, "n_eval_episodes"),
+                                               ({"eval_freq": 1.5}, "eval_freq")])  # fmt: skip
+def test_task_eval_refuses_no_episodes_and_a_fractional_frequency(kwargs, match):
+    with pytest.raises(ValueError, match=f"{match} must be an integer"):
+        TaskEvalCallback(point_env(), **kwargs)

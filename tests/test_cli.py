@@ -184,6 +184,8 @@ def test_main_job_writes_its_results(tmp_path):
     out = tmp_path / "parking"
     results = json.loads((out / "results.json").read_text())
     assert [run["algo"] for run in results["runs"]] == ["swirl_dqn", "dqn"]
+    spec = results["runs"][0]["hyperparams"]["env_wrapper"][0]["sb3_swirl.zoo.SwirlTaskWrapper"]
+    assert spec["demos"] == "2 demos given to the run"  # not the entry's n_demos: 5
     for run in results["runs"]:
         assert run["curve"], "at least one evaluation"
         assert all(0.0 <= p["success_rate"] <= 1.0 for p in run["curve"])

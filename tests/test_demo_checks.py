@@ -154,3 +154,53 @@ def test_a_demo_that_skips_a_phase_is_named():
     x[first:] = x[first] - (x[first:] - x[first])
     with pytest.warns(SegmentationWarning, match=r"none from demos \[5\]"):
         fit_task([*demos[:5], x], random_state=0)
+
+
+def _walks(n: int = 2, steps: int = 40, dim: int = 2) -> list[np.ndarray]:
+    rng = np.random.default_rng(0)
+    return [rng.normal(size=(steps + 1, dim)).cumsum(axis=0) for _ in range(n)]
+
+
+def test_box_actions_are_checked_by_shape_and_warned_outside_their_bounds():
+    import gymnasium as gym
+
+    from sb3_swirl.demos import check_demos_fit_spaces
+
+    space = gym.spaces.Box(-2.0, 2.0, (1,))
+    rng = np.random.default_rng(0)
+    flat = as_demonstrations([{"observations": x, "actions": np.zeros(40)} for x in _walks()])
+    with pytest.raises(ValueError, match=r"demo 0: actions must have shape \(40, 1\).*\[:, None\]"):
+        check_demos_fit_spaces(flat, 2, space, "demo", "the env's observations")
+    inside = [{"observations": x, "actions": rng.uniform(-2, 2, (40, 1))} for x in _walks()]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_demos_fit_spaces(as_demonstrations(inside), 2, space, "demo", "env")
+    scaled = [dict(d, actions=100 * d["actions"]) for d in inside]  # another unit
+    with pytest.warns(DemoWarning, match=r"demos 0 \(\d+ of 40 steps\), 1 .*outside the action"):
+        check_demos_fit_spaces(as_demonstrations(scaled), 2, space, "demo", "env")
+
+
+def test_a_single_demo_saves_loads_and_exports(tmp_path):
+    from sb3_swirl import load_demos, save_demos
+
+    save_demos(_walks(1), tmp_path / "one.npz")
+    (demo,) = load_demos(tmp_path / "one.npz")
+    np.testing.assert_array_equal(demo.observations, _walks(1)[0])
+    with pytest.raises(ValueError, match="at least 2 demonstrations, got 1"):
+        fit_task(tmp_path / "one.npz")  # fitting still needs two
+
+
+def test_a_transposed_demo_and_a_fractional_window_are_told_so():
+    with pytest.raises(ValueError, match=r"more dims \(41\) than states.*transposed"):
+        as_demonstrations([x.T for x in _walks()], window=5)
+    with pytest.raises(ValueError, match=r"window must be an integer >= 1, got 2\.5"):
+        as_demonstrations(_walks(), window=2.5)
+    with pytest.raises(ValueError, match="state_key must be a key or a list of keys, got 5"):
+        as_demonstrations(_walks(), state_key=5)
+
+
+def test_torch_tensors_that_need_grad_are_read_as_arrays():
+    import torch
+
+    demos = as_demonstrations([torch.tensor(x, requires_grad=True) for x in _walks()])
+    np.testing.assert_array_equal(demos[0].observations, _walks()[0])

@@ -178,6 +178,11 @@ def test_set_env_and_load_take_the_envs_reward_settings_with_a_warning(tmp_path)
     with pytest.warns(UserWarning, match="trained with RewardConfig") as caught:
         model.set_env(point_env())
     assert not model.reward_config.potential and caught[0].filename == __file__
+    # a later version records more about the fit: the task is still the same
+    recorded = dataclasses.replace(point_task(), metadata={"state_range": {"low": [0.0]}})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        SwirlDQN.load(tmp_path / "model.zip", env=SwirlWrapper(PointEnv(), recorded, potential))
     shaped = SwirlWrapper(PointEnv(), point_task(), {"mode": "potential", "gamma": 0.99})
     with pytest.warns(
         UserWarning, match="shapes with gamma=0.99 but SwirlDQN discounts with gamma=0.9"
@@ -217,6 +222,13 @@ def test_a_batch_larger_than_the_demo_pairs_is_all_of_them():
             dict(prefill_replay=True, optimize_memory_usage=True, replay_buffer_kwargs={}),
             "optimize_memory_usage",
         ),
+        # DQN's: SB3 failed inside learn() (batch_size), in torch or not at all
+        (dict(batch_size=0), "batch_size must be an integer >= 1, got 0"),
+        (dict(gamma=1.5), r"gamma must be a finite number in \[0, 1\]"),
+        (dict(exploration_final_eps=2.0), "exploration_final_eps"),
+        (dict(max_grad_norm=-1), "max_grad_norm must be a finite number > 0"),
+        (dict(learning_rate=-1e-3), "learning_rate must be a finite number > 0"),
+        (dict(seed=1.5), "seed must be an integer"),
     ],
 )
 def test_bad_settings_fail_at_construction(kwargs, match):

@@ -18,7 +18,7 @@ from stable_baselines3.common.env_checker import check_env
 from stable_baselines3.common.utils import set_random_seed
 
 import sb3_swirl.envs  # noqa: F401  (registers the ids)
-from sb3_swirl import KeysExtractor, SwirlDQN, collect_demos, fit_task
+from sb3_swirl import KeysExtractor, SwirlDQN, as_demonstrations, collect_demos, fit_task
 from sb3_swirl.baselines import run_method
 from sb3_swirl.buffers import DictNStepReplayBuffer
 from sb3_swirl.demos import Demonstration
@@ -412,6 +412,16 @@ def test_dict_demos_are_joined_in_the_wrappers_key_order():
         assert joined.state_key == tuple(KEYS)
     task = fit_task(as_dicts, state_key=KEYS, dims=[16, 17, 18], indicator="gmm", random_state=0)
     assert task.metadata["state_key"] == KEYS
+    # one dict a step, as env.step returns them
+    per_step = [
+        {
+            "observations": [{k: v[t] for k, v in d["observations"].items()} for t in range(n)],
+            "actions": d["actions"],
+        }
+        for d, n in ((d, len(d["actions"]) + 1) for d in as_dicts)
+    ]
+    for joined, demo in zip(as_demonstrations(per_step, state_key=KEYS), demos, strict=True):
+        np.testing.assert_array_equal(joined.observations, demo.observations)
 
 
 def test_keys_extractor_reads_only_its_keys_and_saves(tmp_path):

@@ -230,3 +230,14 @@ def test_a_known_model_steps_raw_observations_when_the_fit_uses_angles_and_dims(
     assert seen and all(s.shape == (4,) for s in seen)
     assert all(np.any(np.all(np.isclose(recorded, s), axis=1)) for s in seen[:50])
     assert task.metadata["reward"]["params"]["dynamics"].endswith("model")
+
+
+def test_float_actions_of_shape_t_are_warned_to_be_read_as_labels():
+    demos = sb3_swirl.collect_demos("sb3_swirl/ParallelParking-v0", 3, seed=0)
+    floats = [Demonstration(d.observations, d.actions.astype(float)) for d in demos]
+    with pytest.warns(UserWarning, match=r"demos \[0, 1, 2\] have float actions.*\[:, None\]"):
+        fit_task(floats, reward="maxent", random_state=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit_task(demos, reward="maxent", random_state=0)
+    assert not [w for w in caught if "float actions" in str(w.message)]

@@ -827,6 +827,25 @@ def test_a_task_on_states_of_another_width_than_its_fit_is_warned_about():
             SwirlWrapper(gym.make("CartPole-v1"), dataclasses.replace(fitted, metadata=metadata))
 
 
+def test_demos_far_outside_the_observation_bounds_are_warned_about():
+    """MountainCar demos in cm (x100) never enter the regions of a task fitted on them; the
+    states the fit recorded tell it against the env's bounds (position -1.2 .. 0.6)."""
+    from sb3_swirl import fit_task
+    from sb3_swirl.demos import make_piecewise_linear_demos
+
+    demos = make_piecewise_linear_demos(n_demos=4, n_phases=2, dim=2, random_state=0)[0]
+    low, high = gym.make("MountainCar-v0").observation_space.low, [0.6, 0.07]
+    inside = [low + (d.observations - d.observations.min()) / np.ptp(d.observations) * (
+        np.asarray(high) - low) for d in demos]  # fmt: skip
+    task = fit_task(inside, indicator="velocity", random_state=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        SwirlWrapper(gym.make("MountainCar-v0"), task)
+    in_cm = fit_task([100 * x for x in inside], indicator="velocity", random_state=0)
+    with pytest.warns(UserWarning, match=r"far outside this env's observation bounds \(dim 0: "):
+        SwirlWrapper(gym.make("MountainCar-v0"), TaskModel.from_json(in_cm.to_json()))
+
+
 def test_make_swirl_env_passes_env_settings_to_gym_make_only():
     from sb3_swirl import make_swirl_env
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import re
 import tomllib
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
@@ -183,6 +184,25 @@ def test_yaml_for_a_plain_gymnasium_env_with_a_demo_file(tmp_path, monkeypatch):
     assert evaluations["results"][-1].mean() > -200
 
 
+def test_a_tuned_trials_swirl_settings_are_given_with_params_and_saved(tmp_path, zoo_cli):
+    """-params reg_covar:... task_reward_weight:... (the -optimize report's names) reach the
+    SwirlTaskWrapper's fit and reward_config, and the run's config.yml says so."""
+    zoo_cli("train", "--algo", "swirl_dqn", "--env", PARKING, "-f", "logs", "-n", "100",
+            "-params", "reg_covar:0.3", "bc_epochs:1", "task_reward_weight:2.0")  # fmt: skip
+    params = tmp_path / "logs/swirl_dqn/sb3_swirl-ParallelParking-v0_1/sb3_swirl-ParallelParking-v0"
+    config = dict(yaml.load((params / "config.yml").read_text(), Loader=yaml.UnsafeLoader))
+    spec = config["env_wrapper"][0]["sb3_swirl.zoo.SwirlTaskWrapper"]
+    assert spec["fit"]["reg_covar"] == 0.3 and spec["fit"]["indicator"] == "gmm"  # merged in
+    assert (
+        spec["reward_config"]["task_reward_weight"] == 2.0
+        and spec["reward_config"]["mode"] == "potential"
+    )
+    assert config["bc_epochs"] == 1
+    task = sb3_swirl.TaskModel.from_json(params / "task.json")
+    assert task.metadata["segmentation"]["params"]["reg_covar"] == 0.3
+    assert task.reward_config.task_reward_weight == 2.0
+
+
 @pytest.mark.parametrize(
     ("change", "message"),
     [
@@ -355,3 +375,21 @@ def test_only_errors_before_training_are_shortened():
         with pytest.raises(ValueError) as error:
             function()
         assert zoo._raised_in_learn(error.value) is inside
+
+
+def test_another_algorithm_is_warned_when_the_shaping_discounts_otherwise(tmp_path, monkeypatch):
+    """SwirlDQN checks its gamma against the wrapper's itself; PPO never sees the wrapper's."""
+    monkeypatch.chdir(tmp_path)
+    _mountaincar_demos(tmp_path / "mountaincar_demos.npz", n=2)
+    spec = MOUNTAINCAR_ENTRY["env_wrapper"][0]["sb3_swirl.zoo.SwirlTaskWrapper"]
+    entry = {"policy": "MlpPolicy", "env_wrapper": [{"sb3_swirl.zoo.SwirlTaskWrapper": spec}]}
+    for gamma, warned in ((0.9, True), (0.99, False)):  # the wrapper shapes with 0.99
+        (tmp_path / "ppo.yml").write_text(
+            yaml.safe_dump({"MountainCar-v0": entry | {"gamma": gamma}})
+        )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            zoo.check_config("ppo", "MountainCar-v0", tmp_path / "ppo.yml")
+        said = [str(w.message) for w in caught if "discounts with gamma" in str(w.message)]
+        assert bool(said) == warned, said
+        assert not said or "ppo.yml, entry 'MountainCar-v0': the SWIRL wrapper shapes" in said[0]

@@ -88,7 +88,7 @@ def lift_observation_space(
                 f"state_key={state_key!r} is only for Dict observation spaces; this one is a Box"
             )
         _check_state_space(space, task, "observation space")
-        _warn_other_layout(task, space.shape[0], None)
+        _warn_other_layout(task, space, None)
         lifted = spaces.Box(
             low=np.concatenate([space.low, np.zeros(n, dtype=space.dtype)]),
             high=np.concatenate([space.high, np.ones(n, dtype=space.dtype)]),
@@ -104,7 +104,7 @@ def lift_observation_space(
         else:
             name = f"observation spaces {list(state_key)} joined"
         _check_state_space(state, task, name)
-        _warn_other_layout(task, state.shape[0], state_key)
+        _warn_other_layout(task, state, state_key)
         segment = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
         return spaces.Dict({**space.spaces, SEGMENT_KEY: segment}), state_key
     if isinstance(space, spaces.MultiDiscrete):
@@ -175,10 +175,12 @@ def state_space(
     return joined, keys
 
 
-def _warn_other_layout(task: TaskModel, state_dim: int, state_key: StateKey) -> None:
+def _warn_other_layout(task: TaskModel, state: spaces.Box, state_key: StateKey) -> None:
     """Warn when the wrapper's task state is laid out otherwise than the states the task was
-    fitted on, where the fit recorded them (``metadata``): another width, or another order of
-    the Dict keys (two keys of one width swapped pass every check of the spaces)."""
+    fitted on, where the fit recorded them (``metadata``): another width, another order of
+    the Dict keys (two keys of one width swapped pass every check of the spaces), or demo
+    states far outside the state's bounds (other units, another env)."""
+    state_dim = state.shape[0]
     fitted_dim, fitted_keys = task.metadata.get("state_dim"), task.metadata.get("state_key")
     if isinstance(fitted_dim, int) and fitted_dim != state_dim and task.state_entries is not None:
         warnings.warn(
@@ -196,6 +198,38 @@ def _warn_other_layout(task: TaskModel, state_dim: int, state_key: StateKey) -> 
             f"order; this wrapper's join {keys}: its regions and rewards then read other "
             "quantities than the demos' (pass state_key as the demos were recorded)",
             stacklevel=4,
+        )
+    if fitted_dim == state_dim:
+        _warn_out_of_bounds(task.metadata.get("state_range"), state)
+
+
+def _warn_out_of_bounds(fitted: Any, state: spaces.Box) -> None:
+    """Warn where the demos' states (``metadata["state_range"]``) reach beyond a finite bound of
+    ``state`` by over a quarter of its width: a demo in cm for an env in m never enters the
+    task's regions, and nothing else tells."""
+    try:
+        low, high = (np.asarray(fitted[end], dtype=np.float64) for end in ("low", "high"))
+    except (TypeError, KeyError, ValueError):
+        return  # not recorded (an older fit, a hand-made task)
+    if low.shape != state.shape or high.shape != state.shape:
+        return
+    bound_low, bound_high = state.low.astype(np.float64), state.high.astype(np.float64)
+    width = bound_high - bound_low
+    finite = np.isfinite(width) & (width > 0)
+    margin = np.where(finite, 0.25 * width, np.inf)
+    far = np.flatnonzero(finite & ((low < bound_low - margin) | (high > bound_high + margin)))
+    if far.size:
+        shown = ", ".join(
+            f"{i}: [{low[i]:.4g}, {high[i]:.4g}] against [{bound_low[i]:.4g}, {bound_high[i]:.4g}]"
+            for i in far[:4]
+        )
+        more = f" and {far.size - 4} more" if far.size > 4 else ""
+        warnings.warn(
+            f"the task was fitted on states far outside this env's observation bounds (dim "
+            f"{shown}{more}): were the demos recorded in other units, or on another env? Its "
+            "regions are then never entered and its rewards read other quantities: fit it on "
+            "demos of this env's states",
+            stacklevel=5,
         )
 
 
