@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 from sklearn.exceptions import NotFittedError
 
-from sb3_swirl.demos import Demonstration
+from sb3_swirl.demos import Demonstration, as_demonstrations
 from swirl_wrappers import Lifter, TaskModel, observation_state
 from swirl_wrappers._validation import check_int, check_option
 
@@ -78,12 +78,29 @@ class BCPolicy:
         from sklearn.preprocessing import StandardScaler
         from sklearn.svm import SVC
 
-        observations = np.asarray(observations, dtype=np.float64)
-        actions = np.asarray(actions)
+        try:
+            observations = np.asarray(observations, dtype=np.float64)
+            actions = np.asarray(actions)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"BCPolicy.fit takes arrays of observations and actions ({exc})"
+            ) from None
         if observations.ndim != 2 or actions.shape != (len(observations),):
             raise ValueError(
                 "observations must have shape (n, d) and actions shape (n,), got "
                 f"{observations.shape} and {actions.shape}"
+            )
+        bad = np.flatnonzero(~np.isfinite(observations).all(axis=1))
+        if bad.size:
+            raise ValueError(f"observations contain NaN or inf (first at row {int(bad[0])})")
+        if actions.dtype.kind not in "biuf" or np.any(actions != np.round(actions)):
+            raise ValueError(
+                "actions must be the integers of a Discrete action space (BC here classifies "
+                f"them), got {actions.dtype} values such as {actions.flat[0]!r}"
+            )
+        if len(np.unique(actions)) < 2:
+            raise ValueError(
+                f"the demos take one action only ({actions.flat[0]!r}): a classifier needs two"
             )
         if self.classifier == "svm":
             classifier = SVC(kernel="rbf", random_state=self.random_state)
@@ -107,8 +124,12 @@ class BCPolicy:
         if isinstance(observation, dict):
             observation = observation_state(observation, self.state_key or "observation")
         x = np.asarray(observation, dtype=np.float64)
-        if x.ndim not in (1, 2):
-            raise ValueError(f"observation must have shape (d,) or (n, d), got {x.shape}")
+        width = self.model_.n_features_in_  # sklearn's record of the width fitted on
+        if x.ndim not in (1, 2) or x.shape[-1] != width:
+            raise ValueError(
+                f"observation must have shape ({width},) or (n, {width}) as the observations "
+                f"fitted on, got {x.shape}"
+            )
         action = self.model_.predict(x.reshape(-1, x.shape[-1]))
         return (action if x.ndim == 2 else action[0]), None
 
@@ -269,6 +290,9 @@ def run_method(
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {sorted(METHODS)}")
     check_int("total_timesteps", total_timesteps, low=1)  # BC's too: one budget for all
+    seed = check_int("seed", seed, low=0, high=2**32 - 10_001)  # the eval env's is seed + 10000
+    if method not in ("dqn", "dqn_rbf", "dqn_her"):  # these learn from the env alone
+        demos = as_demonstrations(demos)
     if method != "swirl":
         _needs_actions(method, demos)
     env_kwargs = dict(env_kwargs or {})

@@ -200,6 +200,11 @@ def fit_task(
         RewardLearner,
     )
     if random_state is not None:
+        if isinstance(random_state, np.random.Generator):
+            raise ValueError(
+                "random_state must be an integer or a numpy RandomState (sklearn takes no "
+                "Generator), got a Generator: pass an integer drawn from it"
+            )
         if not isinstance(random_state, np.random.RandomState):  # sklearn takes both
             random_state = check_int("random_state", random_state, low=0, high=2**32 - 1)
         segmenter.set_params(random_state=random_state)
@@ -225,6 +230,8 @@ def fit_task(
             raise ValueError(
                 f"dims must be indices into the {state_dim} observation dimensions, got {dims}"
             )
+        if len(set(dims)) < len(dims):  # the task model refuses it, after the whole fit
+            raise ValueError(f"dims lists an index more than once: {list(dims)}")
     if angles is not None:
         angles = check_angles(angles)
 

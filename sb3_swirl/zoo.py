@@ -307,10 +307,11 @@ class SwirlTaskWrapper(SwirlWrapper):
                 where = f"segment {self.segment} (of 0-{k - 1})" if self.segment < k else "done"
                 print(f"step {self._steps}: {where}")
             if terminated or truncated:
+                success = f", success {info['is_success']}" if "is_success" in info else ""
                 print(
                     f"episode ends at step {self._steps}, {self.segment} of {k} regions "
-                    f"reached: true return {self._task_return:.2f}, success "
-                    f"{info.get('is_success')} (the episode reward below is the proxy reward)",
+                    f"reached: true return {self._task_return:.2f}{success} (the episode reward "
+                    "below is the proxy reward)",
                     flush=True,
                 )
         return obs, reward, terminated, truncated, info
@@ -399,7 +400,9 @@ def check_config(
     An unregistered ``env_id``, unknown keys (neither rl_zoo3's nor the algorithm's), unknown
     ``SwirlTaskWrapper`` keys, missing demo or task files and demos that do not match the env
     fail with a message naming the file, the entry and the key. The SWIRL task is fitted here
-    (and cached for the run).
+    (and cached for the run). ``overrides`` (``-params``) may hold the SwirlTaskWrapper's
+    ``reg_covar`` and ``task_reward_weight`` under the names the ``-optimize`` report gives
+    them: the returned entry has them in the wrapper's ``fit`` and ``reward_config``.
 
     Returns
     -------

@@ -55,8 +55,17 @@ def test_linear_svm_clones_the_parking_supervisor(demos):
     policy = BCPolicy("linear_svm", random_state=0).fit(x, y)
     assert np.mean(policy.predict(x)[0] == y) >= 0.9
     assert policy.predict(x[3])[0] == policy.predict(x)[0][3]  # one observation, one action
-    with pytest.raises(ValueError, match=r"shape \(d,\) or \(n, d\), got \(2, 5, 4\)"):
+    with pytest.raises(ValueError, match=r"shape \(4,\) or \(n, 4\) .*, got \(2, 5, 4\)"):
         policy.predict(np.stack([x[:5], x[5:10]]))  # never a silent first action of a stack
+    with pytest.raises(ValueError, match=r"shape \(4,\) or \(n, 4\) .*, got \(5, 3\)"):
+        policy.predict(x[:5, :3])  # not sklearn's StandardScaler message
+    for bad_x, bad_y, said in (
+        (np.where(np.arange(len(x))[:, None] == 7, np.nan, x), y, "NaN or inf .*row 7"),
+        (x, y + 0.5, "integers of a Discrete action space"),
+        (x, np.zeros_like(y), "one action only"),
+    ):
+        with pytest.raises(ValueError, match=said):
+            BCPolicy("svm", random_state=0).fit(bad_x, bad_y)
 
 
 def test_methods_that_need_actions_say_so(demos):

@@ -81,6 +81,8 @@ def test_dims_select_state_columns(demos):
         fit_task(wide, dims=[3])
     with pytest.raises(ValueError, match="dims must be integer indices"):
         fit_task(wide, dims=[[1, 2]])
+    with pytest.raises(ValueError, match=r"dims lists an index more than once: \[1, 1\]"):
+        fit_task(wide, dims=[1, 1])  # said before the fit, not by the task model after it
 
 
 def test_estimators_and_kwargs_are_routed(demos):
@@ -103,6 +105,8 @@ def test_estimators_and_kwargs_are_routed(demos):
         ValueError, match=r"random_state must be an integer in \[0, 4294967295\], got -1"
     ):
         fit_task(demos, random_state=-1)
+    with pytest.raises(ValueError, match=r"or a numpy RandomState .* got a Generator"):
+        fit_task(demos, random_state=np.random.default_rng(0))
     by_name = fit_task(demos, reward="quadratic", metric="euclidean", random_state=0)
     assert by_name.metadata["reward"]["class"] == "QuadraticRewardLearner"
 
