@@ -23,6 +23,7 @@ from gymnasium import spaces
 
 from swirl_wrappers._io import atomic_write
 from swirl_wrappers._validation import check_int
+from swirl_wrappers.wrappers import _key_tuple
 
 _NPZ_FORMAT = "sb3_swirl.demos/1"
 # Larger observations overflow float64 when squared (covariances, quadratic rewards).
@@ -150,7 +151,7 @@ def _to_demonstration(item: Any, i: int, state_key: tuple[str, ...] | None = Non
                     ) from None
 
     if key is not None:
-        key = _state_key_tuple(key, f"demo {i}: state_key")
+        key = _key_tuple(key, f"demo {i}: state_key")
     join = key if state_key is None else state_key
     steps = isinstance(obs, list | tuple) and bool(obs) and isinstance(obs[0], Mapping)
     if join is not None and steps:  # one dict a step, as env.step returns them
@@ -200,13 +201,6 @@ def _to_demonstration(item: Any, i: int, state_key: tuple[str, ...] | None = Non
             raise ValueError(f"demo {i}: rewards contain NaN or inf (first at step {bad})")
         rews = rews.astype(np.float64)
     return Demonstration(np.array(obs, dtype=np.float64), acts, rews, key)
-
-
-def _state_key_tuple(key: Any, what: str) -> tuple[str, ...]:
-    keys = (key,) if isinstance(key, str) else tuple(key) if isinstance(key, Iterable) else ()
-    if not keys or not all(isinstance(k, str) for k in keys):
-        raise ValueError(f"{what} must be a key or a list of keys, got {key!r}")
-    return keys
 
 
 def as_demonstrations(
@@ -269,7 +263,7 @@ def _as_demonstrations(data: Any, window: Any, state_key: Any, minimum: int) -> 
         raise ValueError("no demonstrations given")
     if len(items) < minimum:
         raise ValueError(f"SWIRL needs at least 2 demonstrations, got {len(items)}")
-    keys = None if state_key is None else _state_key_tuple(state_key, "state_key")
+    keys = None if state_key is None else _key_tuple(state_key)
     demos = [_to_demonstration(item, i, keys) for i, item in enumerate(items)]
     dim = demos[0].observations.shape[1]
     for i, demo in enumerate(demos):
@@ -357,7 +351,7 @@ def check_demos_state_key(
     ValueError
         Naming the first demo that joined other keys, and both orders.
     """
-    keys = _state_key_tuple(state_key, "state_key")
+    keys = _key_tuple(state_key)
     for i, demo in enumerate(demos):
         if demo.state_key is not None and demo.state_key != keys:
             raise ValueError(

@@ -18,7 +18,6 @@ from torch.nn import functional as F
 from sb3_swirl.buffers import DictNStepReplayBuffer
 from sb3_swirl.demos import (
     Demonstration,
-    _state_key_tuple,
     as_demonstrations,
     check_demos_fit_spaces,
     check_demos_state_key,
@@ -34,6 +33,7 @@ from swirl_wrappers.wrappers import (
     SEGMENT_KEY,
     SEGMENT_REWARD_KEY,
     TASK_REWARD_KEY,
+    _key_tuple,
     relabelling_refused,
     state_space,
 )
@@ -57,7 +57,7 @@ def check_state_key_covers(space: spaces.Dict, state_key: str | Sequence[str]) -
     ValueError
         Naming the keys ``state_key`` leaves out.
     """
-    keys = list(_state_key_tuple(state_key, "state_key"))
+    keys = list(_key_tuple(state_key))
     missing = [key for key in space.spaces if key != SEGMENT_KEY and key not in keys]
     if missing:
         raise ValueError(
@@ -425,7 +425,7 @@ class SwirlDQN(DQN):
 
     def _state_keys(self) -> tuple[str, ...]:
         assert self.env is not None
-        return _state_key_tuple(get_swirl_attr(self.env, "state_key"), "state_key")
+        return _key_tuple(get_swirl_attr(self.env, "state_key"))
 
     def _as_observations(self, states: np.ndarray) -> Any:
         """Demo states as (unlifted) observations: Dict observations split by key."""

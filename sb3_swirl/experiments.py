@@ -420,8 +420,9 @@ def train_and_evaluate(
     best = max(curve, key=lambda p: p["success_rate"], default=None)
     # the settings this run used: its own budget, not the entry's n_timesteps
     used = {**hyperparams, "n_timesteps": total_timesteps}
-    if demos is not None and "demos" in _swirl_spec(used):  # the run's demos, not the entry's
-        spec = {**_swirl_spec(used), "demos": f"{len(demos)} demos given to the run"}
+    spec = _swirl_spec(used)
+    if demos is not None and "demos" in spec:  # the run's demos, not the entry's
+        spec["demos"] = f"{len(demos)} demos given to the run"  # _swirl_spec returns a copy
         wrappers = used["env_wrapper"]
         used["env_wrapper"] = [
             {"sb3_swirl.zoo.SwirlTaskWrapper": spec}

@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 
 import sb3_swirl.envs  # noqa: F401  (registers the sb3_swirl/ env ids)
-from sb3_swirl.demos import Demonstration, _state_key_tuple
+from sb3_swirl.demos import Demonstration
 from sb3_swirl.supervisors.acrobot import AcrobotSupervisor
 from sb3_swirl.supervisors.fetch import (
     FetchPickAndPlaceSupervisor,
@@ -33,6 +33,7 @@ from sb3_swirl.supervisors.line_cutting import LineCuttingSupervisor
 from sb3_swirl.supervisors.tensioning import TensioningSupervisor
 from swirl_wrappers import observation_state, state_space
 from swirl_wrappers._validation import check_int
+from swirl_wrappers.wrappers import _key_tuple
 
 #: env id -> ``"module:Class"`` of its supervisor, imported on first use
 SUPERVISORS: dict[str, str] = {
@@ -235,7 +236,7 @@ def _run_episode(
         observations=np.asarray(states, dtype=np.float64),
         actions=np.asarray(actions, dtype=np.int64),
         rewards=np.asarray(rewards, dtype=np.float64),
-        state_key=None if state_key is None else _state_key_tuple(state_key, "state_key"),
+        state_key=None if state_key is None else _key_tuple(state_key),
     )
     return demo, np.asarray(phases, dtype=np.int64)
 

@@ -14,7 +14,7 @@ reset ``info`` gets ``"segment"``. The environment's own info keys pass through.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -154,9 +154,7 @@ def state_space(
                 f"the task state, one of {sorted(space.spaces)}"
             )
         state_key = "observation"
-    keys = (state_key,) if isinstance(state_key, str) else tuple(state_key)
-    if not keys or not all(isinstance(key, str) for key in keys):
-        raise ValueError(f"state_key must be a key or a list of keys, got {state_key!r}")
+    keys = _key_tuple(state_key)
     for key in keys:
         if key not in space.spaces:
             raise ValueError(
@@ -175,6 +173,21 @@ def state_space(
     return joined, keys
 
 
+def _key_tuple(state_key: Any, what: str = "state_key") -> tuple[str, ...]:
+    """``state_key``, one key or several, as a tuple of keys; anything else is a ``ValueError``
+    (``what`` names it)."""
+    keys = (
+        (state_key,)
+        if isinstance(state_key, str)
+        else tuple(state_key)
+        if isinstance(state_key, Iterable)
+        else ()
+    )
+    if not keys or not all(isinstance(key, str) for key in keys):
+        raise ValueError(f"{what} must be a key or a list of keys, got {state_key!r}")
+    return keys
+
+
 def _warn_other_layout(task: TaskModel, state: spaces.Box, state_key: StateKey) -> None:
     """Warn when the wrapper's task state is laid out otherwise than the states the task was
     fitted on, where the fit recorded them (``metadata``): another width, another order of
@@ -191,7 +204,7 @@ def _warn_other_layout(task: TaskModel, state: spaces.Box, state_key: StateKey) 
             "states are",
             stacklevel=4,
         )
-    keys = [state_key] if isinstance(state_key, str) else list(state_key or ())
+    keys = [] if state_key is None else list(_key_tuple(state_key))
     if isinstance(fitted_keys, list | tuple) and keys and list(fitted_keys) != keys:
         warnings.warn(
             f"the task was fitted on states that join the keys {list(fitted_keys)}, in that "
@@ -289,7 +302,7 @@ def _keys_read(space: gym.Space, task: TaskModel, state_key: StateKey) -> list[s
     that hold one of the task's ``state_entries`` in the joined state."""
     if state_key is None:
         return []
-    keys = [state_key] if isinstance(state_key, str) else list(state_key)
+    keys = list(_key_tuple(state_key))
     entries = task.state_entries
     if entries is None:
         return keys
