@@ -34,11 +34,17 @@ def _new_figure(figsize: tuple[float, float]) -> Figure:
 
 
 def _finish(fig: Figure, path: str | os.PathLike | None) -> Figure:
-    """Save ``fig`` atomically (in the format of the path's suffix) when ``path`` is given."""
+    """Save ``fig`` atomically (in the format of the path's suffix) when ``path`` is given.
+
+    PNG, SVG and PDF files are the same bytes for the same figure: no creation date, and SVG's
+    element ids drawn from a fixed salt."""
     if path is not None:
-        suffix = os.path.splitext(path)[1].lstrip(".") or "png"
-        with atomic_write(path, "wb") as fh:
-            fig.savefig(fh, format=suffix, dpi=120)
+        from matplotlib import rc_context
+
+        suffix = os.path.splitext(path)[1].lstrip(".").lower() or "png"
+        undated = {"svg": {"Date": None}, "pdf": {"CreationDate": None}}.get(suffix)
+        with atomic_write(path, "wb") as fh, rc_context({"svg.hashsalt": "sb3-swirl"}):
+            fig.savefig(fh, format=suffix, dpi=120, metadata=undated)
     return fig
 
 

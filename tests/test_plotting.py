@@ -86,3 +86,13 @@ def test_plot_transitions_marks_candidates_and_region_entries(fitted, tmp_path):
     other, _ = make_piecewise_linear_demos(n_demos=4, dim=3, noise=0.1, random_state=5)
     fig = plot_transitions(other, task)
     assert "fitted on other demonstrations" in fig.texts[0].get_text()
+
+
+@pytest.mark.parametrize("suffix", ["png", "svg", "pdf"])
+def test_the_same_plot_saves_the_same_bytes(fitted, tmp_path, suffix):
+    # No creation date, and SVG's element ids from a fixed salt: a plot can be diffed.
+    _, task = fitted
+    first, second = tmp_path / f"a.{suffix}", tmp_path / f"b.{suffix}"
+    plot_rewards(task, path=first)
+    plot_rewards(task, path=second)
+    assert first.read_bytes() == second.read_bytes()
