@@ -687,6 +687,29 @@ def _saved_task(model_path: str) -> TaskModel:
     return task
 
 
+def _runs_with_a_model(argv: list[str], env_id: str) -> str:
+    """A hint for ``enjoy`` without ``--exp-id`` when the latest run holds no final model
+    (a run refused or stopped before it ended leaves its folder): the runs that hold one."""
+    from huggingface_sb3 import EnvironmentName
+
+    loads = ("--load-best", "--load-checkpoint", "--load-last-checkpoint")
+    if int(_option(argv, "--exp-id", default="0")) != 0 or any(a in argv for a in loads):
+        return ""
+    name = str(EnvironmentName(env_id))
+    runs = Path(str(_option(argv, "-f", "--folder"))) / str(_option(argv, "--algo"))
+    ids = sorted(
+        int(run.name.rsplit("_", 1)[1])
+        for run in runs.glob(f"{name}_[0-9]*")
+        if run.name.rsplit("_", 1)[1].isdigit() and (run / f"{name}.zip").is_file()
+    )
+    if not ids:
+        return ""
+    return (
+        "; the latest run holds no final model (refused or stopped before it ended?). Runs "
+        f"that hold one: --exp-id {', '.join(map(str, ids))}"
+    )
+
+
 def _enjoy(argv: list[str]) -> int:
     from rl_zoo3.enjoy import enjoy
 
@@ -711,7 +734,7 @@ def _enjoy(argv: list[str]) -> int:
             model_path, _ = _model_path(argv, env_id)
             task = _saved_task(model_path)
         except (AssertionError, ValueError) as exc:  # no such run or model
-            print(f"error: {exc}", file=sys.stderr)
+            print(f"error: {exc}{_runs_with_a_model(argv, env_id)}", file=sys.stderr)
             return 2
     print(f"sb3-swirl: the model's task, {task.n_segments} segments", flush=True)
     with tempfile.TemporaryDirectory() as tmp:

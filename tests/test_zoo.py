@@ -168,6 +168,21 @@ def test_train_enjoy_tensorboard_and_plots_swirl_dqn_and_dqn(tmp_path, zoo_cli):
     assert (tmp_path / "curves.png").stat().st_size > 1000
 
 
+def test_enjoy_names_the_runs_with_a_model_when_the_latest_has_none(tmp_path, monkeypatch, capsys):
+    """A refused or interrupted run leaves its folder, which rl_zoo3 takes as the latest."""
+    monkeypatch.chdir(tmp_path)
+    runs = tmp_path / "logs/swirl_dqn"
+    (runs / "sb3_swirl-ParallelParking-v0_1").mkdir(parents=True)
+    (runs / "sb3_swirl-ParallelParking-v0_1/sb3_swirl-ParallelParking-v0.zip").write_bytes(b"")
+    (runs / "sb3_swirl-ParallelParking-v0_2").mkdir()
+    enjoy = ["enjoy", "--algo", "swirl_dqn", "--env", PARKING, "-f", "logs", "--no-render"]
+    assert zoo.main(enjoy) == 2
+    error = capsys.readouterr().err
+    assert "No model found" in error and "Runs that hold one: --exp-id 1" in error
+    assert zoo.main([*enjoy, "--exp-id", "2"]) == 2  # asked for: no hint
+    assert "Runs that hold one" not in capsys.readouterr().err
+
+
 def test_yaml_for_a_plain_gymnasium_env_with_a_demo_file(tmp_path, monkeypatch):
     """MountainCar (no supervisor of ours): 10 demos from a file, SwirlDQN through the zoo."""
     monkeypatch.chdir(tmp_path)
