@@ -19,6 +19,7 @@ from sb3_swirl.demos import as_demonstrations
 from sb3_swirl.segmentation import turn_angles
 from swirl_wrappers import TaskModel
 from swirl_wrappers._io import atomic_write
+from swirl_wrappers._validation import check_int
 
 
 def _colors(n: int) -> list[Any]:
@@ -123,7 +124,9 @@ def plot_segments(
     """
     _check_task(task)
     demos = _task_demos(demos, task)
-    a, b = (int(d) for d in dims)
+    pair = tuple(dims) if isinstance(dims, Sequence) and not isinstance(dims, str) else ()
+    whole = len(pair) == 2 and all(isinstance(d, int | np.integer) for d in pair)
+    a, b = (int(d) for d in pair) if whole else (-1, -1)
     if task.task_dim < 2 or not (0 <= a < task.task_dim and 0 <= b < task.task_dim and a != b):
         raise ValueError(
             f"dims must be two different task-space axes in 0..{task.task_dim - 1}, got {dims}"
@@ -214,7 +217,7 @@ def plot_transitions(
     """
     _check_task(task)
     demos = _task_demos(demos, task)
-    shown = demos[: max(1, int(max_demos))]
+    shown = demos[: check_int("max_demos", max_demos, low=1)]
     states = [task.featurize(d.observations) for d in demos]
     spread = np.concatenate(states).std(axis=0)
     spread[spread == 0] = 1.0

@@ -912,6 +912,26 @@ def _merge_fragments(
         groups = [g for k, g in enumerate(groups) if k not in (i, j)] + [merged]
 
 
+def _check_switches(name: str, switches: Sequence[Any], lengths: Sequence[int]) -> list[np.ndarray]:
+    """``switches`` as int arrays, one per demonstration, each step in ``0 .. lengths[i]``."""
+    if len(switches) != len(lengths):
+        raise ValueError(f"{name} has {len(switches)} entries for {len(lengths)} demos")
+    out = []
+    for i, (sw, n) in enumerate(zip(switches, lengths, strict=True)):
+        a = np.asarray(sw)
+        if a.size == 0:
+            out.append(np.zeros(0, dtype=np.int64))
+            continue
+        whole = a.dtype.kind in "iu" or (a.dtype.kind == "f" and np.all(np.mod(a, 1) == 0))
+        if a.ndim != 1 or not whole or a.min() < 0 or a.max() > n:
+            raise ValueError(
+                f"{name}[{i}] must be a 1-D array of whole steps in 0..{n} (the demo's "
+                f"length), got {np.array2string(a, threshold=8)}"
+            )
+        out.append(a.astype(np.int64))
+    return out
+
+
 def dynamics_cv_error(
     states: Sequence[np.ndarray],
     switches: Sequence[np.ndarray],
@@ -948,8 +968,25 @@ def dynamics_cv_error(
     float
         The mean squared error per step (lower is better).
     """
+    ridge = check_real("ridge", ridge, low=0.0, low_open=True)
+    if len(states) == 0:
+        raise ValueError("dynamics_cv_error needs the states of at least one demonstration")
+    states = [np.asarray(x, dtype=np.float64) for x in states]
+    for i, x in enumerate(states):
+        if x.ndim != 2 or len(x) < 2 or x.shape[1] != states[0].shape[1]:
+            raise ValueError(
+                f"states[{i}] must be an array of shape (T + 1, {states[0].shape[-1]}) with "
+                f"T >= 1, like states[0]; got shape {x.shape}"
+            )
+        if not np.isfinite(x).all():
+            raise ValueError(f"states[{i}] holds NaN or infinite values")
+    switches = _check_switches("switches", switches, [len(x) for x in states])
     if time_scale is None:
         time_scale = np.ones(len(states))
+    elif len(time_scale) != len(states):
+        raise ValueError(f"time_scale has {len(time_scale)} values for {len(states)} demos")
+    for i, r in enumerate(time_scale):
+        check_real(f"time_scale[{i}]", r, low=0.0, low_open=True)
     pooled = np.concatenate(states)
     scale = _scale(pooled)
     # a dimension far from its origin (a timestamp, a UTM coordinate) is centred, or its sums
@@ -1016,9 +1053,13 @@ def switch_scores(
     >>> switch_scores([np.array([10, 52])], [np.array([11, 30])], [100])["f1"]
     0.5
     """
+    tolerance = check_real("tolerance", tolerance, low=0.0)
+    min_tolerance = check_int("min_tolerance", min_tolerance, low=0)
+    lengths = [check_int(f"lengths[{i}]", n, low=1) for i, n in enumerate(lengths)]
+    found = _check_switches("found", found, lengths)
+    true = _check_switches("true", true, lengths)
     hits = n_found = n_true = 0
     for f, t, n in zip(found, true, lengths, strict=True):
-        f, t = np.asarray(f, dtype=np.int64), np.asarray(t, dtype=np.int64)
         tol = max(min_tolerance, math.ceil(tolerance * n))
         pairs = sorted(
             (abs(int(a) - int(b)), i, j)

@@ -104,3 +104,34 @@ def test_switch_scores_counts_each_true_switch_once():
     assert scores["recall"] == 0.5
     assert switch_scores([np.array([])], [np.array([5])], [100])["f1"] == 0.0
     assert switch_scores([np.array([])], [np.array([])], [100])["f1"] == 1.0
+
+
+def test_switch_scores_and_dynamics_cv_error_refuse_switches_that_do_not_fit_the_demos():
+    from sb3_swirl import dynamics_cv_error
+
+    demos, switches = make_switching_demos(n_demos=3, dim=2, random_state=7)
+    states, lengths = [d.observations for d in demos], [len(d) for d in demos]
+    assert dynamics_cv_error(states, switches) < dynamics_cv_error(states, [[]] * 3)
+    beyond = [*switches[:2], np.array([len(demos[2]) + 50])]
+    bad = {
+        "switches has 2 entries for 3 demos": (states, switches[:2]),
+        r"switches\[2\] must be a 1-D array of whole steps in 0\.\.": (states, beyond),
+        r"switches\[0\] must be .* got \[10\.5\]": (states, [[10.5], *switches[1:]]),
+        r"states\[1\] must be an array of shape \(T \+ 1, 2\)": (
+            [states[0], states[1][:, :1], states[2]],
+            switches,
+        ),
+    }
+    for message, (s, sw) in bad.items():
+        with pytest.raises(ValueError, match=message):
+            dynamics_cv_error(s, sw)
+    with pytest.raises(ValueError, match="ridge must be a finite number > 0"):
+        dynamics_cv_error(states, switches, ridge=-1.0)
+    with pytest.raises(ValueError, match="time_scale has 1 values for 3 demos"):
+        dynamics_cv_error(states, switches, time_scale=[1.0])
+    with pytest.raises(ValueError, match="true has 2 entries for 3 demos"):
+        switch_scores(switches, switches[:2], lengths)
+    with pytest.raises(ValueError, match=r"found\[0\] must be .* got \[-4\]"):
+        switch_scores([[-4], *switches[1:]], switches, lengths)
+    with pytest.raises(ValueError, match="tolerance must be a finite number >= 0, got nan"):
+        switch_scores(switches, switches, lengths, tolerance=float("nan"))

@@ -55,6 +55,11 @@ def test_plot_segments_rejects_bad_dims(fitted):
         plot_segments(demos, task, dims=(0, 0))
     with pytest.raises(ValueError, match="two different task-space axes"):
         plot_segments(demos, task, dims=(0, 5))
+    for dims in [(0,), (0, 1, 2), (0.5, 1), "01"]:
+        with pytest.raises(ValueError, match="two different task-space axes"):
+            plot_segments(demos, task, dims=dims)
+    with pytest.raises(ValueError, match="max_demos must be an integer >= 1, got 0"):
+        plot_transitions(demos, task, max_demos=0)
 
 
 def test_plots_refuse_a_path_in_place_of_a_task(fitted):

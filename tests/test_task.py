@@ -310,6 +310,9 @@ def test_paths_that_look_like_json_are_read_as_files(tmp_path, monkeypatch):
 def test_missing_file_is_a_value_error(tmp_path):
     with pytest.raises(ValueError, match="cannot read task model file"):
         TaskModel.from_json(tmp_path / "absent.json")
+    for source in (None, 5, {"regions": []}):
+        with pytest.raises(ValueError, match="JSON text or the path of a JSON file, got"):
+            TaskModel.from_json(source)
 
 
 @pytest.mark.parametrize(

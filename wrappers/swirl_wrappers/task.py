@@ -992,6 +992,11 @@ class TaskModel:
         """
         if isinstance(source, bytes | bytearray):  # JSON text read in binary mode
             source = source.decode("utf-8")
+        if not isinstance(source, str | os.PathLike):
+            raise ValueError(
+                "TaskModel.from_json takes JSON text or the path of a JSON file, got "
+                f"{type(source).__name__}"
+            )
         text = str(source)
         file = None  # the file read, named in every error
         if (
