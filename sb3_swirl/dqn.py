@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Sequence
 from typing import Any, ClassVar, Literal
@@ -164,6 +165,8 @@ class SwirlDQN(DQN):
     Attributes
     ----------
     task : TaskModel
+        The proxy task the model learns, with its ``reward_config``: an env wrapped with it
+        (``SwirlWrapper(env, model.task)``) segments and rewards as in training.
     reward_config : RewardConfig
         The env's reward settings (the proxy reward of the replayed demos).
     inverse_dynamics_ : InverseDynamics
@@ -330,8 +333,11 @@ class SwirlDQN(DQN):
         assert self.env is not None
         if task is not None and not isinstance(task, TaskModel):
             raise ValueError(f"task must be a swirl_wrappers.TaskModel, got {type(task).__name__}")
-        self.task = get_swirl_attr(self.env, "task")
         self.reward_config = get_swirl_attr(self.env, "reward_config")
+        # model.task rewards as the model was trained: wrapping an env with it goes on alike
+        self.task = dataclasses.replace(
+            get_swirl_attr(self.env, "task"), reward_config=self.reward_config
+        )
         self.terminate_on_completion = get_swirl_attr(self.env, "terminate_on_completion")
         self.task_json = self.task.to_json()
         if task is not None and not same_task(task, self.task):
@@ -442,6 +448,8 @@ class SwirlDQN(DQN):
     def _setup_model(self) -> None:
         if self.task is None and self.task_json is not None:  # `load` without an env
             self.task = TaskModel.from_json(self.task_json)
+            if isinstance(self.reward_config, RewardConfig):  # the rewards it was trained with
+                self.task = dataclasses.replace(self.task, reward_config=self.reward_config)
         elif self.task is not None and self._trained_on_another(self.task):  # `load` with one
             raise ValueError(
                 "the environment's proxy task differs from the one this model was trained "

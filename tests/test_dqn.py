@@ -171,6 +171,10 @@ def test_set_env_and_load_take_the_envs_reward_settings_with_a_warning(tmp_path)
         # a task file that carries the reward settings (the zoo's task.json) is the same task
         carried = dataclasses.replace(point_task(), reward_config=RewardConfig(**potential))
         SwirlDQN.load(tmp_path / "model.zip", env=SwirlWrapper(PointEnv(), carried))
+        # model.task carries them: an env wrapped with it (the advice on a refused env) too
+        for source in (model, SwirlDQN.load(tmp_path / "model.zip")):
+            assert source.task.reward_config == RewardConfig(**potential)
+            SwirlDQN.load(tmp_path / "model.zip", env=SwirlWrapper(PointEnv(), source.task))
     with pytest.warns(UserWarning, match="trained with RewardConfig") as caught:
         loaded = SwirlDQN.load(tmp_path / "model.zip", env=point_env(terminate_on_completion=True))
     assert not loaded.reward_config.potential  # the env's, as set_env takes them
