@@ -382,13 +382,14 @@ def check_demos_fit_spaces(
     demos: Sequence[Demonstration],
     state_dim: int,
     action_space: spaces.Space | None,
-    source: str,
-    env_note: str,
+    source: str = "demonstration",
+    env_note: str = "the environment's observations",
     hint: str = "",
 ) -> None:
     """Raise unless every demo has ``state_dim`` observation dims and actions that fit
-    ``action_space``: integers in ``0 .. n - 1`` for ``Discrete(n)``, rows of the space's shape
-    for a ``Box`` (values outside its bounds are a :class:`DemoWarning`: the env may clip them).
+    ``action_space``: integers in ``start .. start + n - 1`` for ``Discrete``, rows of the
+    space's shape for a ``Box`` (values outside its bounds are a :class:`DemoWarning`: the env
+    may clip them).
 
     Messages read ``"{source} {n}: observations have 3 dims, {env_note} have 4{hint}"``.
 
@@ -441,25 +442,24 @@ def check_demos_fit_spaces(
 def _check_discrete_actions(
     actions: np.ndarray, n_steps: int, space: spaces.Discrete, source: str, n: int
 ) -> None:
-    n_actions = int(space.n)
+    first, last = int(space.start), int(space.start) + int(space.n) - 1
     if actions.ndim != 1:
         squeeze = " (one action a step: pass actions.ravel())" if actions.size == n_steps else ""
         raise ValueError(
             f"{source} {n}: actions must be integers of shape ({n_steps},) "
-            f"for the Discrete({n_actions}) action space, got shape {actions.shape}{squeeze}"
+            f"for the {space} action space, got shape {actions.shape}{squeeze}"
         )
     fractional = np.flatnonzero(actions != np.round(actions))
     if fractional.size:
         step = int(fractional[0])
         raise ValueError(
-            f"{source} {n}: actions must be integers for the Discrete({n_actions}) action "
+            f"{source} {n}: actions must be integers for the {space} action "
             f"space, got {actions[step]!r} at step {step}"
         )
-    if actions.size and (actions.min() < 0 or actions.max() >= n_actions):
+    if actions.size and (actions.min() < first or actions.max() > last):
         raise ValueError(
-            f"{source} {n}: actions must lie in the action space Discrete("
-            f"{n_actions}), i.e. 0 .. {n_actions - 1}; got values in "
-            f"[{actions.min():g}, {actions.max():g}]"
+            f"{source} {n}: actions must lie in the action space {space}, i.e. {first} .. "
+            f"{last}; got values in [{actions.min():g}, {actions.max():g}]"
         )
 
 

@@ -70,7 +70,7 @@ def check_state_key_covers(space: spaces.Dict, state_key: str | Sequence[str]) -
 
 
 def check_discrete_actions(space: spaces.Space) -> None:
-    """Raise unless ``space`` is ``Discrete``: SwirlDQN is a DQN.
+    """Raise unless ``space`` is ``Discrete`` from 0: SwirlDQN is a DQN.
 
     Parameters
     ----------
@@ -87,6 +87,13 @@ def check_discrete_actions(space: spaces.Space) -> None:
             f"SwirlDQN needs discrete actions (it is a DQN), and the env has {space}: train "
             "another SB3 algorithm (SAC, TD3, PPO) on the same SWIRL wrapper, without the BC "
             "start"
+        )
+    if int(space.start) != 0:
+        raise ValueError(
+            f"SwirlDQN needs actions 0 .. n-1 (SB3's DQN picks Q-value indices), and the env "
+            f"has {space}: shift them, e.g. a gymnasium.ActionWrapper whose action(a) returns "
+            f"a + {int(space.start)}, with its action_space Discrete({space.n}), and record the "
+            "demos' actions in that range"
         )
 
 

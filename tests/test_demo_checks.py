@@ -180,6 +180,23 @@ def test_box_actions_are_checked_by_shape_and_warned_outside_their_bounds():
         check_demos_fit_spaces(as_demonstrations(scaled), 2, space, "demo", "env")
 
 
+def test_discrete_actions_are_checked_from_the_spaces_start():
+    import gymnasium as gym
+
+    from sb3_swirl.demos import check_demos_fit_spaces
+
+    space = gym.spaces.Discrete(4, start=1)
+    ones = as_demonstrations([{"observations": x, "actions": np.full(40, 4)} for x in _walks()])
+    check_demos_fit_spaces(ones, 2, space)  # 4 is an action of Discrete(4, start=1)
+    zeros = as_demonstrations([{"observations": x, "actions": np.zeros(40)} for x in _walks()])
+    with pytest.raises(
+        ValueError, match=r"demonstration 0: .*Discrete\(4, start=1\), i\.e\. 1 \.\. 4"
+    ):
+        check_demos_fit_spaces(zeros, 2, space)
+    with pytest.raises(ValueError, match="demonstration 0: observations have 2 dims, the "):
+        check_demos_fit_spaces(ones, 3, space)
+
+
 def test_a_single_demo_saves_loads_and_exports(tmp_path):
     from sb3_swirl import load_demos, save_demos
 

@@ -108,6 +108,13 @@ def test_continuous_actions_are_refused_with_what_to_train_instead():
         SwirlDQN("MlpPolicy", env)  # was SB3's AssertionError
 
 
+def test_discrete_actions_from_another_start_are_refused_with_how_to_shift_them():
+    env = SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 60), point_task())
+    env.action_space = gym.spaces.Discrete(4, start=1)  # DQN would pick 0 .. 3
+    with pytest.raises(ValueError, match=r"actions 0 \.\. n-1 .*start=1.*a \+ 1"):
+        SwirlDQN("MlpPolicy", env)
+
+
 def test_double_q_scores_the_online_nets_action_with_the_target_net():
     model = SwirlDQN("MlpPolicy", point_env(), demonstrations=point_demos(2), seed=0)
     obs = th.as_tensor(np.stack([model.observation_space.sample() for _ in range(16)]))
