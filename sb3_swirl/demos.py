@@ -325,9 +325,9 @@ _RATE_FACTOR = 3.0
 # a corrupted value, not data.
 _ABSURD_FACTOR = 1e6
 _RATE_WHY = (
-    "recorded at another sampling rate (or cut short where the others slow down)? The "
-    "segmentation resamples the demos to a common rate (normalize_time=True), which undoes "
-    "another sampling rate, not a demo cut short"
+    "recorded at another sampling rate (or cut short where the others slow down)? By "
+    "default (normalize_time=True) the segmentation resamples the demos to a common rate, "
+    "which undoes another sampling rate, not a demo cut short"
 )
 _LENGTH_WHY = "incomplete, or at another rate? An incomplete demo can hide or merge segments"
 
@@ -565,14 +565,49 @@ def _robust_scale(states: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]
     return centre, spread
 
 
-def _rate_ratios(states: Sequence[np.ndarray], spread: np.ndarray) -> np.ndarray:
-    """Each demo's typical step and number of steps over the median of the other demos'.
+# A demo is at rest at its start (end) while it stays within this fraction of its extent of
+# its first (last) state; a rest counts when it lasts this fraction of its steps (shorter
+# ones barely move a median, and every demo of the benchmark's generators has one)
+_REST_FRACTION, _REST_STEPS = 0.02, 0.1
 
-    The typical step is the median of ``||s_{t+1} - s_t||`` with each dimension divided by
-    ``spread``. Returns shape (n_demos, 2); NaN where a median is 0.
+
+def _typical_step(x: np.ndarray, scale: np.ndarray) -> tuple[float, int]:
+    """A demo's typical step and its number of steps in motion.
+
+    The typical step is the median of ``||s_{t+1} - s_t||``, each dimension divided by
+    ``scale``, over the steps between the demo's rest at its start and at its end: the states
+    before it leaves (after it settles within) 2% of its extent of its first (last) state,
+    where such a rest lasts a tenth of its steps or more. A demo that waits at its goal until
+    a time limit would otherwise read as one recorded at a finer sampling rate.
     """
-    steps = [np.median(np.linalg.norm(np.diff(x / spread, axis=0), axis=1)) for x in states]
-    values = np.column_stack([steps, [len(x) - 1 for x in states]]).astype(np.float64)
+    z = x / scale
+    if len(z) < 2:
+        return 0.0, 0
+    first, last = (np.linalg.norm(z - z[end], axis=1) for end in (0, -1))
+    tol = _REST_FRACTION * max(float(first.max()), float(last.max()))
+    moved, unsettled = np.flatnonzero(first > tol), np.flatnonzero(last > tol)
+    if moved.size == 0 or unsettled.size == 0:
+        return float(np.median(np.linalg.norm(np.diff(z, axis=0), axis=1))), len(z) - 1
+    # steps from the last state at rest at the start to the first state at rest at the end
+    start, stop = max(int(moved[0]) - 1, 0), int(unsettled[-1]) + 1
+    if stop <= start:
+        start, stop = 0, len(z) - 1
+    least = _REST_STEPS * (len(z) - 1)
+    start, stop = (
+        (start if start >= least else 0),
+        (stop if len(z) - 1 - stop >= least else len(z) - 1),
+    )
+    steps = np.linalg.norm(np.diff(z[start : stop + 1], axis=0), axis=1)
+    return float(np.median(steps)), stop - start
+
+
+def _rate_ratios(states: Sequence[np.ndarray], spread: np.ndarray) -> np.ndarray:
+    """Each demo's typical step and number of steps in motion over the median of the other
+    demos' (``_typical_step``, with each dimension divided by ``spread``).
+
+    Returns shape (n_demos, 2); NaN where a median is 0.
+    """
+    values = np.array([_typical_step(x, spread) for x in states], dtype=np.float64)
     others = np.array([np.median(np.delete(values, n, axis=0), axis=0) for n in range(len(values))])
     with np.errstate(divide="ignore", invalid="ignore"):
         ratios = values / others

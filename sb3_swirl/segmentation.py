@@ -44,7 +44,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, InvalidParameterError, StrOptions
 from threadpoolctl import threadpool_limits
 
-from sb3_swirl.demos import as_demonstrations, check_demos_agree, check_window
+from sb3_swirl.demos import _typical_step, as_demonstrations, check_demos_agree, check_window
 from swirl_wrappers import QuadraticReward, RBFFeatures, Region, TaskModel
 from swirl_wrappers._validation import check_int, check_option, check_real
 
@@ -134,13 +134,12 @@ def _shared_course_dims(
 def _time_scales(states: list[np.ndarray]) -> np.ndarray:
     """Each demonstration's typical step over the median of all demonstrations' (1 if 0).
 
-    The typical step is the median of ``||s_{t+1} - s_t||``, each dimension divided by its
-    standard deviation over all states.
+    The typical step (``sb3_swirl.demos._typical_step``: while it moves, not at rest at its
+    start or end) is measured with each dimension divided by its standard deviation over all
+    states.
     """
     scale = _scale(np.concatenate(states))
-    typical = np.array(
-        [np.median(np.linalg.norm(np.diff(x / scale, axis=0), axis=1)) for x in states]
-    )
+    typical = np.array([_typical_step(x, scale)[0] for x in states])
     reference = float(np.median(typical))
     if not reference > 0:
         return np.ones(len(states))
@@ -1274,10 +1273,11 @@ by "+", or callable, default "auto"
         that expire.
     normalize_time : bool, default True
         Resample every demonstration (linear interpolation) so that its typical step, the
-        median of ``||s_{t+1} - s_t||`` over its steps (each dimension divided by its spread
-        over all states), equals the median over all demonstrations, before a built-in
-        indicator runs and transitions are clustered in time (a callable indicator gets the
-        demonstrations as given). Demonstrations recorded at other sampling
+        median of ``||s_{t+1} - s_t||`` over its steps in motion (each dimension divided by its
+        spread over all states; a long rest at its start or end left out, see
+        ``sb3_swirl.demos._typical_step``), equals the median over all demonstrations,
+        before a built-in indicator runs and transitions are clustered in time (a callable
+        indicator gets the demonstrations as given). Demonstrations recorded at other sampling
         rates, or by slower demonstrators, then look alike to the windowed indicators.
         Candidate steps are mapped back to each demonstration's own steps; the regions, and
         the segmentation an agent gets, depend on states only.

@@ -221,3 +221,21 @@ def test_torch_tensors_that_need_grad_are_read_as_arrays():
 
     demos = as_demonstrations([torch.tensor(x, requires_grad=True) for x in _walks()])
     np.testing.assert_array_equal(demos[0].observations, _walks()[0])
+
+
+def test_a_demo_that_waits_at_its_goal_is_not_taken_for_another_rate():
+    """A demo truncated by a time limit after reaching its goal rests there; its steps while
+    at rest are not its rate (they read as 1/19 of the others' and collapsed the fit)."""
+    demos, _ = make_switching_demos(n_demos=5, n_phases=3, dim=2, random_state=8)
+    states = [d.observations for d in demos]
+    rng = np.random.default_rng(8)
+    rest = states[4][-1] + rng.normal(0.0, 1e-3, (5 * len(states[4]), 2))
+    waiting = [*states[:4], np.concatenate([states[4], rest])]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DemoWarning)
+        assert check_demos_agree(as_demonstrations(waiting)) == []
+        fitted = fit_task(waiting, random_state=0)
+    assert fitted.n_segments == fit_task(states, random_state=0).n_segments == 3
+    # a demo at another rate is still told apart
+    coarse = [*states[:4], states[4][::7]]
+    assert any(m.startswith("demo 4:") for m in check_demos_agree(as_demonstrations(coarse)))

@@ -906,3 +906,22 @@ def test_make_swirl_env_with_subprocesses_from_python_c(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip() == "ok"
+
+
+def test_a_state_that_is_not_a_number_is_warned_about_once():
+    """NaN from the env would be a NaN reward the agent learns from, without a word."""
+    env = SwirlWrapper(PointEnv(), line_task())
+    env.reset(seed=0)
+    env.unwrapped.pos[0] = np.nan
+    with pytest.warns(
+        UserWarning, match=r"proxy reward is nan .* not a finite number.*VecCheckNan"
+    ):
+        env.step(STAY)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.isnan(env.step(STAY)[1])  # once per tracker: no warning at every step
+    venv = SwirlVecEnv(DummyVecEnv([PointEnv, PointEnv]), line_task())
+    venv.reset()
+    venv.envs[1].unwrapped.pos[0] = np.inf
+    with pytest.warns(UserWarning, match="not a finite number"):
+        venv.step(np.array([STAY, STAY]))

@@ -20,6 +20,8 @@ wrappers, and sb3-swirl's demo relabelling), and applies the same rules to both:
 
 from __future__ import annotations
 
+import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -116,6 +118,7 @@ class SegmentTracker:
         zero = 0 if num_envs is None else np.zeros(self.num_envs, dtype=np.int64)
         self.index = self.ended_index = self.t = zero
         self.potential = 0.0 if num_envs is None else np.zeros(self.num_envs)
+        self._warned_not_finite = False
 
     def reset(self, states: np.ndarray, mask: np.ndarray | None = None) -> None:
         """Start new episodes from ``states`` (one state, or one per episode where ``mask``).
@@ -232,6 +235,16 @@ class SegmentTracker:
         else:
             reward = config.scale * segment_reward
         reward = reward + config.region_bonus * entered + config.task_reward_weight * task_rewards
+        finite = math.isfinite(reward) if self.num_envs is None else np.isfinite(reward).all()
+        if not finite and not self._warned_not_finite:
+            self._warned_not_finite = True
+            warnings.warn(
+                f"the proxy reward is {reward} (once per tracker): the env gave a state "
+                f"{np.asarray(states).tolist()} or a reward {task_rewards} that is not a "
+                "finite number, and the agent would learn from it (SB3's VecCheckNan "
+                "wrapper, raise_exception=True, stops at the step that gives one)",
+                stacklevel=4,
+            )
         self.index = self.ended_index = index
         self.t = t
         return reward, terminated
