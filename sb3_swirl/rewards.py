@@ -11,15 +11,17 @@ sees exactly the segments an agent will be rewarded on.
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from numbers import Integral, Real
 from typing import Any, ClassVar
 
 import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.utils._param_validation import Interval, StrOptions
+from threadpoolctl import threadpool_limits
 
 from sb3_swirl.demos import Demonstration, as_demonstrations
 from sb3_swirl.segmentation import (
@@ -283,6 +285,20 @@ def segment_transitions(
     return out, regions
 
 
+@contextlib.contextmanager
+def _one_thread() -> Iterator[None]:
+    """Torch's and the BLAS libraries' work on one thread, as before afterwards."""
+    import torch as th
+
+    threads = th.get_num_threads()
+    th.set_num_threads(1)
+    try:
+        with threadpool_limits(limits=1, user_api="blas"):
+            yield
+    finally:
+        th.set_num_threads(threads)
+
+
 class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
     """Model-based local rewards by maximum-entropy IRL on each segment (§6.2).
 
@@ -457,22 +473,25 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         var = pooled.var(axis=0) + 1e-12
         constant = _constant_dims(pooled)
         rewards, sizes, loglik, scales = [], [], [], []
-        for seg, region in zip(segments, regions, strict=True):
-            x = seg["x"] if len(seg["x"]) else pooled
-            sizes.append(len(seg["x"]))
-            if not len(seg["x"]):  # no demo entered: no evidence, an isotropic reward
-                weight, ll = np.diag(1.0 / var), float("nan")
-            elif discrete:
-                weight, ll = self._fit_discrete(seg, region.mean, n_actions, featurize, var)
-            else:
-                weight, ll = self._fit_continuous(seg, region.mean, var)
-            weight[constant] = 0.0
-            weight[:, constant] = 0.0
-            scale = _mean_cost(x, region.mean, weight) if self.normalize else 1.0
-            scale = scale if scale > 1e-12 else 1.0
-            rewards.append(QuadraticReward(target=region.mean, weight=weight / scale))
-            loglik.append(ll)
-            scales.append(scale)
+        # one thread: the tensors are small, and the fit then does not depend on the machine's
+        # cores (with 2 threads one of 15 parking demos' segments got a 100x smaller Psi)
+        with _one_thread():
+            for seg, region in zip(segments, regions, strict=True):
+                x = seg["x"] if len(seg["x"]) else pooled
+                sizes.append(len(seg["x"]))
+                if not len(seg["x"]):  # no demo entered: no evidence, an isotropic reward
+                    weight, ll = np.diag(1.0 / var), float("nan")
+                elif discrete:
+                    weight, ll = self._fit_discrete(seg, region.mean, n_actions, featurize, var)
+                else:
+                    weight, ll = self._fit_continuous(seg, region.mean, var)
+                weight[constant] = 0.0
+                weight[:, constant] = 0.0
+                scale = _mean_cost(x, region.mean, weight) if self.normalize else 1.0
+                scale = scale if scale > 1e-12 else 1.0
+                rewards.append(QuadraticReward(target=region.mean, weight=weight / scale))
+                loglik.append(ll)
+                scales.append(scale)
         self.rewards_ = rewards
         self.segment_sizes_ = sizes
         self.log_likelihoods_ = loglik

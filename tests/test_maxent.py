@@ -241,3 +241,22 @@ def test_float_actions_of_shape_t_are_warned_to_be_read_as_labels():
         warnings.simplefilter("always")
         fit_task(demos, reward="maxent", random_state=0)
     assert not [w for w in caught if "float actions" in str(w.message)]
+
+
+def test_the_fit_does_not_depend_on_torchs_threads_and_leaves_them_as_they_were():
+    """Torch's sums depend on its thread count: with 2 threads and with 1 these demos' Psi
+    differed by up to 4.4 before the fit ran on one thread (machines differ in cores)."""
+    import torch as th
+
+    demos = collect_demos(PARKING, 5, seed=0)
+    kwargs = {"reg_covar": 0.1, "normalize_time": False, "random_state": 0}
+    before, weights = th.get_num_threads(), []
+    try:
+        for threads in (2, 1):
+            th.set_num_threads(threads)
+            task = fit_task(demos, reward="maxent", **kwargs)
+            assert th.get_num_threads() == threads
+            weights.append(np.concatenate([r.weight.ravel() for r in task.rewards]))
+    finally:
+        th.set_num_threads(before)
+    np.testing.assert_array_equal(weights[0], weights[1])
