@@ -344,8 +344,9 @@ class TaskEvalCallback(EvalCallback):
 
         if self.verbose >= 1:
             print(
-                f"Eval num_timesteps={self.num_timesteps}, episodes={self.n_training_episodes}, "
-                f"success_rate={success_rate:.2f}, task_return={task_return:.3f}"
+                f"Eval num_timesteps={self.num_timesteps}, "
+                f"training_episodes={self.n_training_episodes}, success_rate={success_rate:.2f} "
+                f"over {len(episode_lengths)} episodes, task_return={task_return:.3f}"
             )
         self.logger.record("eval/mean_reward", self.last_mean_reward)
         self.logger.record("eval/mean_ep_length", float(np.mean(episode_lengths)))

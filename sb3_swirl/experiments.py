@@ -465,7 +465,11 @@ def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path)
             values = [p[key] for p in run["curve"]]
             ax.plot(episodes, values, marker="o", markersize=size, label=labels[run["algo"]])
     success_ax.axhline(
-        preset.target_success, color="grey", linestyle="--", linewidth=1, label="target"
+        preset.target_success,
+        color="grey",
+        linestyle="--",
+        linewidth=1,
+        label=f"target ({preset.target_success:.0%})",
     )
     success_ax.set_ylabel(f"true success rate ({preset.n_eval_episodes} eval episodes)")
     success_ax.set_ylim(-0.02, 1.02)

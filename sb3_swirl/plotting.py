@@ -267,17 +267,19 @@ def plot_transitions(
         pad = max(0.5, 0.01 * len(z))  # a region entered at the last step stays in view
         ax.set_xlim(-pad, len(z) - 1 + pad)
     axes[-1].set_xlabel("step")
+    fig.supylabel("speed per step in task space, each axis divided by its spread", fontsize="small")
+    some = f"{len(shown)} of {len(demos)}" if len(shown) < len(demos) else f"{len(demos)}"
+    title = f"Transitions over time: {some} demonstrations, {_segments(task)}"
+    if candidates is None:
+        title += "\n(candidates not shown: the task was fitted on other demonstrations)"
+    fig.suptitle(title, fontsize="medium")
     handles, labels = [], []
     for ax in fig.axes:  # the panels and their twins
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
-    fig.legend(handles, labels, loc="outside upper center", ncols=4, fontsize="small")
-    if candidates is None:
-        fig.suptitle(
-            "(candidates not shown: the task was fitted on other demonstrations)", fontsize="small"
-        )
+    fig.legend(handles, labels, loc="outside lower center", ncols=4, fontsize="small")
     return _finish(fig, path)
 
 

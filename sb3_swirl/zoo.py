@@ -32,6 +32,7 @@ import dataclasses
 import difflib
 import importlib
 import inspect
+import io
 import json
 import os
 import sys
@@ -304,7 +305,11 @@ class SwirlTaskWrapper(SwirlWrapper):
             self._task_return += float(info["task_reward"])
             k = self.task.n_segments
             if self.segment != before:
-                where = f"segment {self.segment} (of 0-{k - 1})" if self.segment < k else "done"
+                where = (
+                    f"segment {self.segment} (of 0-{k - 1})"
+                    if self.segment < k
+                    else "every region reached"
+                )
                 print(f"step {self._steps}: {where}")
             if terminated or truncated:
                 success = f", success {info['is_success']}" if "is_success" in info else ""
@@ -639,15 +644,16 @@ def _model_path(argv: list[str], env_id: str) -> tuple[str, str]:
     from huggingface_sb3 import EnvironmentName
     from rl_zoo3.utils import get_model_path
 
-    _, model_path, log_path = get_model_path(
-        int(_option(argv, "--exp-id", default="0")),
-        str(_option(argv, "-f", "--folder", default="rl-trained-agents")),
-        str(_option(argv, "--algo", default="ppo")),
-        EnvironmentName(env_id),
-        "--load-best" in argv,
-        _option(argv, "--load-checkpoint"),
-        "--load-last-checkpoint" in argv,
-    )
+    with contextlib.redirect_stdout(io.StringIO()):  # rl_zoo3's enjoy says it again
+        _, model_path, log_path = get_model_path(
+            int(_option(argv, "--exp-id", default="0")),
+            str(_option(argv, "-f", "--folder", default="rl-trained-agents")),
+            str(_option(argv, "--algo", default="ppo")),
+            EnvironmentName(env_id),
+            "--load-best" in argv,
+            _option(argv, "--load-checkpoint"),
+            "--load-last-checkpoint" in argv,
+        )
     return model_path, log_path
 
 

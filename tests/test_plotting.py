@@ -90,7 +90,8 @@ def test_plot_transitions_marks_candidates_and_region_entries(fitted, tmp_path):
     # demos the task was not fitted on: no candidates, said in the title
     other, _ = make_piecewise_linear_demos(n_demos=4, dim=3, noise=0.1, random_state=5)
     fig = plot_transitions(other, task)
-    assert "fitted on other demonstrations" in fig.texts[0].get_text()
+    assert "fitted on other demonstrations" in fig.get_suptitle()
+    assert fig.get_suptitle().startswith("Transitions over time: 4 demonstrations")
 
 
 @pytest.mark.parametrize("suffix", ["png", "svg", "pdf"])
