@@ -19,6 +19,7 @@ from torch.nn import functional as F
 from sb3_swirl.buffers import DictNStepReplayBuffer
 from sb3_swirl.demos import (
     Demonstration,
+    DemoWarning,
     as_demonstrations,
     check_demos_fit_spaces,
     check_demos_state_key,
@@ -35,6 +36,7 @@ from swirl_wrappers.wrappers import (
     SEGMENT_REWARD_KEY,
     TASK_REWARD_KEY,
     _key_tuple,
+    far_outside_bounds,
     relabelling_refused,
     state_space,
 )
@@ -413,6 +415,20 @@ class SwirlDQN(DQN):
             if dict_obs
             else " (demos must be states of the env under the SWIRL wrapper)",
         )
+        states = [d.observations for d in self.demonstrations if len(d.observations)]
+        far = far_outside_bounds(
+            np.min([x.min(axis=0) for x in states], axis=0),
+            np.max([x.max(axis=0) for x in states], axis=0),
+            self._demo_space(),
+        )
+        if far:
+            warnings.warn(
+                f"the demonstrations' states lie far outside the env's observation bounds "
+                f"({far}): recorded in other units, or on another env? BC would clone their "
+                "actions at states the agent never sees",
+                DemoWarning,
+                stacklevel=3,  # the SwirlDQN(...) call
+            )
         unlabelled = [i for i, d in enumerate(self.demonstrations) if d.actions is None]
         if unlabelled and self.infer_actions == "inverse_dynamics" and dict_obs:
             raise ValueError(

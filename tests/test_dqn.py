@@ -689,3 +689,16 @@ def test_a_plain_subprocess_env_is_a_clear_error_not_a_dead_worker():
         assert venv.get_attr("spec")[0].id == "CartPole-v1"  # the workers are still alive
     finally:
         venv.close()
+
+
+def test_demos_far_outside_the_observation_bounds_are_warned_about():
+    """Demos in cm for an env in m: the clone would learn at states the agent never sees."""
+    from sb3_swirl.demos import DemoWarning
+
+    demos = point_demos(2)
+    in_cm = [Demonstration(d.observations * 100, d.actions) for d in demos]
+    with pytest.warns(DemoWarning, match=r"far outside the env's observation bounds \(dim 0: "):
+        SwirlDQN("MlpPolicy", point_env(), demonstrations=in_cm, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        SwirlDQN("MlpPolicy", point_env(), demonstrations=demos, seed=0)

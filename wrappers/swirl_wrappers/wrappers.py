@@ -224,26 +224,35 @@ def _warn_out_of_bounds(fitted: Any, state: spaces.Box) -> None:
         low, high = (np.asarray(fitted[end], dtype=np.float64) for end in ("low", "high"))
     except (TypeError, KeyError, ValueError):
         return  # not recorded (an older fit, a hand-made task)
-    if low.shape != state.shape or high.shape != state.shape:
-        return
-    bound_low, bound_high = state.low.astype(np.float64), state.high.astype(np.float64)
+    far = far_outside_bounds(low, high, state)
+    if far:
+        warnings.warn(
+            f"the task was fitted on states far outside this env's observation bounds ({far}): "
+            "were the demos recorded in other units, or on another env? Its regions are then "
+            "never entered and its rewards read other quantities: fit it on demos of this "
+            "env's states",
+            stacklevel=5,
+        )
+
+
+def far_outside_bounds(low: np.ndarray, high: np.ndarray, space: spaces.Box) -> str:
+    """The dims where states ranging over ``low .. high`` reach beyond a finite bound of
+    ``space`` by over a quarter of its width, as ``"dim 0: [lo, hi] against [a, b], ..."``;
+    ``""`` where none does (or the shapes differ)."""
+    if low.shape != space.shape or high.shape != space.shape:
+        return ""
+    bound_low, bound_high = space.low.astype(np.float64), space.high.astype(np.float64)
     width = bound_high - bound_low
     finite = np.isfinite(width) & (width > 0)
     margin = np.where(finite, 0.25 * width, np.inf)
     far = np.flatnonzero(finite & ((low < bound_low - margin) | (high > bound_high + margin)))
-    if far.size:
-        shown = ", ".join(
-            f"{i}: [{low[i]:.4g}, {high[i]:.4g}] against [{bound_low[i]:.4g}, {bound_high[i]:.4g}]"
-            for i in far[:4]
-        )
-        more = f" and {far.size - 4} more" if far.size > 4 else ""
-        warnings.warn(
-            f"the task was fitted on states far outside this env's observation bounds (dim "
-            f"{shown}{more}): were the demos recorded in other units, or on another env? Its "
-            "regions are then never entered and its rewards read other quantities: fit it on "
-            "demos of this env's states",
-            stacklevel=5,
-        )
+    if not far.size:
+        return ""
+    shown = ", ".join(
+        f"{i}: [{low[i]:.4g}, {high[i]:.4g}] against [{bound_low[i]:.4g}, {bound_high[i]:.4g}]"
+        for i in far[:4]
+    )
+    return f"dim {shown}" + (f" and {far.size - 4} more" if far.size > 4 else "")
 
 
 def _check_state_space(space: gym.Space, task: TaskModel | None, name: str) -> None:
