@@ -566,9 +566,11 @@ def _robust_scale(states: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]
 
 
 # A demo is at rest at its start (end) while it stays within this fraction of its extent of
-# its first (last) state; a rest counts when it lasts this fraction of its steps (shorter
-# ones barely move a median, and every demo of the benchmark's generators has one)
-_REST_FRACTION, _REST_STEPS = 0.02, 0.1
+# its first (last) state. The rests are left out of its rate when together they hold at least
+# _REST_STEPS of its steps (a median of steps is then far off; shorter ones, such as a slow
+# approach to a goal, barely move it) and the rest of it _MOTION_STEPS (a single jump in a
+# demo that never moves is not its motion).
+_REST_FRACTION, _REST_STEPS, _MOTION_STEPS = 0.02, 0.25, 0.05
 
 
 def _typical_step(x: np.ndarray, scale: np.ndarray) -> tuple[float, int]:
@@ -577,28 +579,24 @@ def _typical_step(x: np.ndarray, scale: np.ndarray) -> tuple[float, int]:
     The typical step is the median of ``||s_{t+1} - s_t||``, each dimension divided by
     ``scale``, over the steps between the demo's rest at its start and at its end: the states
     before it leaves (after it settles within) 2% of its extent of its first (last) state,
-    where such a rest lasts a tenth of its steps or more. A demo that waits at its goal until
+    where these rests hold a quarter of its steps or more. A demo that waits at its goal until
     a time limit would otherwise read as one recorded at a finer sampling rate.
     """
     z = x / scale
-    if len(z) < 2:
+    n_steps = len(z) - 1
+    if n_steps < 1:
         return 0.0, 0
+    steps = np.linalg.norm(np.diff(z, axis=0), axis=1)
     first, last = (np.linalg.norm(z - z[end], axis=1) for end in (0, -1))
     tol = _REST_FRACTION * max(float(first.max()), float(last.max()))
     moved, unsettled = np.flatnonzero(first > tol), np.flatnonzero(last > tol)
-    if moved.size == 0 or unsettled.size == 0:
-        return float(np.median(np.linalg.norm(np.diff(z, axis=0), axis=1))), len(z) - 1
-    # steps from the last state at rest at the start to the first state at rest at the end
-    start, stop = max(int(moved[0]) - 1, 0), int(unsettled[-1]) + 1
-    if stop <= start:
-        start, stop = 0, len(z) - 1
-    least = _REST_STEPS * (len(z) - 1)
-    start, stop = (
-        (start if start >= least else 0),
-        (stop if len(z) - 1 - stop >= least else len(z) - 1),
-    )
-    steps = np.linalg.norm(np.diff(z[start : stop + 1], axis=0), axis=1)
-    return float(np.median(steps)), stop - start
+    if moved.size and unsettled.size:
+        # steps from the last state at rest at the start to the first state at rest at the end
+        start, stop = max(int(moved[0]) - 1, 0), int(unsettled[-1]) + 1
+        motion = stop - start
+        if n_steps - motion >= _REST_STEPS * n_steps and motion >= _MOTION_STEPS * n_steps:
+            return float(np.median(steps[start:stop])), motion
+    return float(np.median(steps)), n_steps
 
 
 def _rate_ratios(states: Sequence[np.ndarray], spread: np.ndarray) -> np.ndarray:

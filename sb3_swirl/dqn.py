@@ -71,13 +71,16 @@ def check_state_key_covers(space: spaces.Dict, state_key: str | Sequence[str]) -
         )
 
 
-def check_discrete_actions(space: spaces.Space) -> None:
-    """Raise unless ``space`` is ``Discrete`` from 0: SwirlDQN is a DQN.
+def check_discrete_actions(space: spaces.Space, *, from_zero: bool = True) -> None:
+    """Raise unless ``space`` is ``Discrete`` (from 0, with ``from_zero``): SwirlDQN is a DQN.
 
     Parameters
     ----------
     space : gymnasium.spaces.Space
         The env's action space.
+    from_zero : bool
+        Also refuse ``Discrete(n, start=k)`` with ``k != 0`` (off where a wrapper applied
+        later may shift the actions).
 
     Raises
     ------
@@ -90,7 +93,7 @@ def check_discrete_actions(space: spaces.Space) -> None:
             "another SB3 algorithm (SAC, TD3, PPO) on the same SWIRL wrapper, without the BC "
             "start"
         )
-    if int(space.start) != 0:
+    if from_zero and int(space.start) != 0:
         raise ValueError(
             f"SwirlDQN needs actions 0 .. n-1 (SB3's DQN picks Q-value indices), and the env "
             f"has {space}: shift them, e.g. a gymnasium.ActionWrapper whose action(a) returns "

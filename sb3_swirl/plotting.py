@@ -124,7 +124,10 @@ def plot_segments(
     """
     _check_task(task)
     demos = _task_demos(demos, task)
-    pair = tuple(dims) if isinstance(dims, Sequence) and not isinstance(dims, str) else ()
+    try:  # a pair of whole axes: a tuple, a list, an array
+        pair = () if isinstance(dims, str) else tuple(dims)
+    except TypeError:
+        pair = ()
     whole = len(pair) == 2 and all(isinstance(d, int | np.integer) for d in pair)
     a, b = (int(d) for d in pair) if whole else (-1, -1)
     if task.task_dim < 2 or not (0 <= a < task.task_dim and 0 <= b < task.task_dim and a != b):

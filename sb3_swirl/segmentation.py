@@ -960,7 +960,7 @@ def dynamics_cv_error(
         Per demonstration, old steps per step of a common rate (e.g. ``time_scale_``); ones
         by default.
     ridge : float
-        Ridge penalty on the standardised features.
+        Ridge penalty on the standardised features (> 0).
 
     Returns
     -------

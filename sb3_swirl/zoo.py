@@ -487,8 +487,8 @@ def check_config(
         if algo == "swirl_dqn":
             from sb3_swirl.dqn import check_discrete_actions
 
-            with _reraise_in(where):
-                check_discrete_actions(env.action_space)
+            with _reraise_in(where):  # the entry's other wrappers may shift the actions:
+                check_discrete_actions(env.action_space, from_zero=False)  # SwirlDQN checks
         for spec in specs:
             allowed = set(inspect.signature(SwirlTaskWrapper).parameters) - {"env"}
             _check_keys(f"{where}, SwirlTaskWrapper", spec, allowed)
@@ -699,7 +699,7 @@ def _runs_with_a_model(argv: list[str], env_id: str) -> str:
     from huggingface_sb3 import EnvironmentName
 
     loads = ("--load-best", "--load-checkpoint", "--load-last-checkpoint")
-    if int(_option(argv, "--exp-id", default="0")) != 0 or any(a in argv for a in loads):
+    if str(_option(argv, "--exp-id", default="0")) != "0" or any(a in argv for a in loads):
         return ""
     name = str(EnvironmentName(env_id))
     runs = Path(str(_option(argv, "-f", "--folder"))) / str(_option(argv, "--algo"))
@@ -740,7 +740,8 @@ def _enjoy(argv: list[str]) -> int:
             model_path, _ = _model_path(argv, env_id)
             task = _saved_task(model_path)
         except (AssertionError, ValueError) as exc:  # no such run or model
-            print(f"error: {exc}{_runs_with_a_model(argv, env_id)}", file=sys.stderr)
+            hint = _runs_with_a_model(argv, env_id) if str(exc).startswith("No model") else ""
+            print(f"error: {exc}{hint}", file=sys.stderr)
             return 2
     print(f"sb3-swirl: the model's task, {task.n_segments} segments", flush=True)
     with tempfile.TemporaryDirectory() as tmp:

@@ -236,6 +236,11 @@ def test_a_demo_that_waits_at_its_goal_is_not_taken_for_another_rate():
         assert check_demos_agree(as_demonstrations(waiting)) == []
         fitted = fit_task(waiting, random_state=0)
     assert fitted.n_segments == fit_task(states, random_state=0).n_segments == 3
+    # a demo at rest but for one jump is not read from the jump alone
+    from sb3_swirl.demos import _typical_step
+
+    jump = np.r_[np.zeros(50), 5.0, np.zeros(50)][:, None]
+    assert _typical_step(jump, np.ones(1)) == (0.0, 100)
     # a demo at another rate is still told apart
     coarse = [*states[:4], states[4][::7]]
     assert any(m.startswith("demo 4:") for m in check_demos_agree(as_demonstrations(coarse)))

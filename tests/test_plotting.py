@@ -55,7 +55,8 @@ def test_plot_segments_rejects_bad_dims(fitted):
         plot_segments(demos, task, dims=(0, 0))
     with pytest.raises(ValueError, match="two different task-space axes"):
         plot_segments(demos, task, dims=(0, 5))
-    for dims in [(0,), (0, 1, 2), (0.5, 1), "01"]:
+    plot_segments(demos, task, dims=np.array([0, 2]))  # an array of axes is fine
+    for dims in [(0,), (0, 1, 2), (0.5, 1), "01", 5]:
         with pytest.raises(ValueError, match="two different task-space axes"):
             plot_segments(demos, task, dims=dims)
     with pytest.raises(ValueError, match="max_demos must be an integer >= 1, got 0"):

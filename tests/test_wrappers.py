@@ -914,14 +914,15 @@ def test_a_state_that_is_not_a_number_is_warned_about_once():
     env.reset(seed=0)
     env.unwrapped.pos[0] = np.nan
     with pytest.warns(
-        UserWarning, match=r"proxy reward is nan .* not a finite number.*VecCheckNan"
-    ):
+        UserWarning, match=r"proxy reward is nan \(said once\): the state \[nan\].*VecCheckNan"
+    ) as caught:
         env.step(STAY)
+    assert caught[0].filename == __file__
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert np.isnan(env.step(STAY)[1])  # once per tracker: no warning at every step
     venv = SwirlVecEnv(DummyVecEnv([PointEnv, PointEnv]), line_task())
     venv.reset()
     venv.envs[1].unwrapped.pos[0] = np.inf
-    with pytest.warns(UserWarning, match="not a finite number"):
+    with pytest.warns(UserWarning, match=r"proxy reward is -?(inf|nan) in env 1 .*\[inf\]"):
         venv.step(np.array([STAY, STAY]))

@@ -238,16 +238,27 @@ class SegmentTracker:
         finite = math.isfinite(reward) if self.num_envs is None else np.isfinite(reward).all()
         if not finite and not self._warned_not_finite:
             self._warned_not_finite = True
-            warnings.warn(
-                f"the proxy reward is {reward} (once per tracker): the env gave a state "
-                f"{np.asarray(states).tolist()} or a reward {task_rewards} that is not a "
-                "finite number, and the agent would learn from it (SB3's VecCheckNan "
-                "wrapper, raise_exception=True, stops at the step that gives one)",
-                stacklevel=4,
-            )
+            self._warn_not_finite(states, task_rewards, reward)
         self.index = self.ended_index = index
         self.t = t
         return reward, terminated
+
+    def _warn_not_finite(self, states: Any, task_rewards: Any, reward: Any) -> None:
+        if self.num_envs is None:
+            where, state, task_reward, value = "", states, task_rewards, reward
+        else:
+            i = int(np.flatnonzero(~np.isfinite(reward))[0])
+            where = f" in env {i}"
+            state, value = states[i], reward[i]
+            task_reward = np.broadcast_to(task_rewards, np.shape(reward))[i]
+        warnings.warn(
+            f"the proxy reward is {value}{where} (said once): the state "
+            f"{np.asarray(state).tolist()} or the env's reward {task_reward} is not a finite "
+            "number, or the state is so large that the quadratic reward overflows; the agent "
+            "would learn from it (SB3's VecCheckNan wrapper, raise_exception=True, stops at "
+            "the step that gives one)",
+            stacklevel=5,
+        )
 
     def _potential(
         self, x: np.ndarray, index: Any, terminated: Any, reward: Any = None, moved: Any = True

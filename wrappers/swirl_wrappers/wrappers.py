@@ -236,9 +236,9 @@ def _warn_out_of_bounds(fitted: Any, state: spaces.Box) -> None:
 
 
 def far_outside_bounds(low: np.ndarray, high: np.ndarray, space: spaces.Box) -> str:
-    """The dims where states ranging over ``low .. high`` reach beyond a finite bound of
-    ``space`` by over a quarter of its width, as ``"dim 0: [lo, hi] against [a, b], ..."``;
-    ``""`` where none does (or the shapes differ)."""
+    """The dims bounded on both sides in ``space`` where states ranging over ``low .. high``
+    reach beyond a bound by over a quarter of the width, as ``"dim 0: [lo, hi] against [a, b],
+    ..."``; ``""`` where none does (or the shapes differ)."""
     if low.shape != space.shape or high.shape != space.shape:
         return ""
     bound_low, bound_high = space.low.astype(np.float64), space.high.astype(np.float64)
