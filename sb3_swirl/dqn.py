@@ -418,7 +418,7 @@ class SwirlDQN(DQN):
             if dict_obs
             else " (demos must be states of the env under the SWIRL wrapper)",
         )
-        states = [d.observations for d in self.demonstrations if len(d.observations)]
+        states = [d.observations for d in self.demonstrations]  # 2 states or more each
         far = far_outside_bounds(
             np.min([x.min(axis=0) for x in states], axis=0),
             np.max([x.max(axis=0) for x in states], axis=0),
