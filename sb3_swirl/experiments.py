@@ -48,6 +48,18 @@ def _output_name(stem: str, suffix: str, quick: bool) -> str:
     return f"{stem}{'_quick' if quick else ''}{suffix}"
 
 
+def _table_output(out_dir: str | Path, name: str, quick: bool) -> Path:
+    """Where table ``name`` writes its results, checked before any work: a table runs whole
+    (it is not a sweep to resume), so one written before is an error, not overwritten."""
+    path = Path(out_dir) / name / _output_name("results", ".json", quick)
+    if path.exists():
+        raise ValueError(
+            f"{path} exists: {name} is not overwritten; move it away or choose another output"
+        )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
 @dataclass(frozen=True)
 class Preset:
     """What the main job runs on one shipped task.
@@ -756,8 +768,7 @@ def reproduce_table1(
     # train_and_evaluate's own evaluation runs once, at the end, on one episode: every method
     # is scored below on the same episodes
     preset = replace(base, eval_freq=steps, n_eval_episodes=1)
-    out = Path(out_dir) / "table1"
-    out.mkdir(parents=True, exist_ok=True)
+    path = _table_output(out_dir, "table1", quick)
     console.rule(f"[bold]Table 1: gauze tensioning, {len(seeds)} seed(s), {steps} steps")
 
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name in _TABLE1_LABELS}
@@ -847,7 +858,6 @@ def reproduce_table1(
         - PAPER_TABLE1["swirl"] / PAPER_TABLE1["segmented_bc"],
         "stamp": _settings_stamp(),
     }
-    path = out / _output_name("results", ".json", quick)
     write_results(results, path)
 
     table = Table(
@@ -871,7 +881,8 @@ def reproduce_table1(
         )
     _table_console().print(table)
     console.print(
-        f"SWIRL's value is {gain:.1%} better than segmented BC's "
+        f"SWIRL's value is {abs(gain):.1%} {'better' if gain >= 0 else 'worse'} than segmented "
+        "BC's "
         f"(paper: {results['paper_swirl_gain_over_segmented_bc']:.1%}); "
         f"SWIRL found {', '.join(map(str, segments))} segments"
         + (" (per seed)" if spread else "")
@@ -946,8 +957,7 @@ def reproduce_table2(
     radii = [None, 3.0, 1.5] if quick else list(PAPER_TABLE2)
     episodes, n_eval = (10, 5) if quick else (25, 15)
     seeds = _checked_seeds(([0] if quick else [0, 1, 2]) if seeds is None else seeds)
-    out = Path(out_dir) / "table2"
-    out.mkdir(parents=True, exist_ok=True)
+    path = _table_output(out_dir, "table2", quick)
     console.rule(
         f"[bold]Table 2: line cutting, {len(seeds)} seed(s), {episodes} episodes of exploration"
     )
@@ -1024,7 +1034,6 @@ def reproduce_table2(
         "swirl_successes": [combined, n_eval * len(runs)],
         "stamp": _settings_stamp(),
     }
-    path = out / _output_name("results", ".json", quick)
     write_results(results, path)
 
     def cm(value: float | None) -> str:

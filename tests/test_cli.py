@@ -485,6 +485,18 @@ def test_reproduce_all_checks_every_output_before_any_work(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["table1"]  # nothing else was made
 
 
+@pytest.mark.parametrize("name", ["table1", "table2"])
+def test_a_table_refuses_to_overwrite_its_results(tmp_path, capsys, name):
+    """A table runs whole: results already written are an error before any work, and stay."""
+    table = tmp_path / name / "results_quick.json"
+    table.parent.mkdir()
+    table.write_text('{"kept": true}')
+    assert main(["reproduce", name, "--quick", "--out", str(tmp_path), "-q"]) == 2
+    assert f"{name}/results_quick.json exists: {name} is not overwritten" in _err(capsys)
+    assert table.read_text() == '{"kept": true}'
+    assert sorted(p.name for p in table.parent.iterdir()) == ["results_quick.json"]
+
+
 def test_transfer_runs_take_demos_on_one_env_and_learn_on_another():
     """Fig. 7's jobs: demos of the standard car, learning and evaluation on both; Fig. 8's
     swept link lengths reach gym.make; --quick shrinks demos, budgets and swept values."""

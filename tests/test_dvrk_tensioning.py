@@ -209,8 +209,9 @@ def test_bc_policy_refuses_mismatched_shapes():
 
 
 @pytest.mark.slow
-def test_reproduce_table1_quick(tmp_path):
+def test_reproduce_table1_quick(tmp_path, capsys):
     import json
+    import re
 
     from sb3_swirl.experiments import reproduce_table1
 
@@ -223,3 +224,9 @@ def test_reproduce_table1_quick(tmp_path):
     # the demonstrator, on the same starts, flattens the sheet every time
     assert summary["supervisor"]["success_rate"] == 1.0
     assert results["settings"]["seeds"] == [0] and results["n_segments"][0] >= 2
+    gain = results["swirl_gain_over_segmented_bc"]  # a loss reads "worse", not "-x% better"
+    said = re.search(
+        r"SWIRL's value is (\d+\.\d)% (better|worse)", " ".join(capsys.readouterr().err.split())
+    )
+    assert said and said[2] == ("better" if gain >= 0 else "worse")
+    assert float(said[1]) == pytest.approx(abs(gain) * 100, abs=0.05)
