@@ -540,9 +540,15 @@ def build_parser() -> argparse.ArgumentParser:
         "with --jobs workers",
     )
     p.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
-    p.add_argument("--panels", nargs="+", default=None, help="a subset of a figure's panels")
     p.add_argument(
-        "--methods", nargs="+", default=None, help="a subset of a figure's methods (labels)"
+        "--panels", nargs="+", default=None, help="a subset of a figure's panels (e.g. parking)"
+    )
+    p.add_argument(
+        "--methods",
+        nargs="+",
+        default=None,
+        help="a subset of a figure's methods by name, as its records and results.json spell "
+        "them (e.g. swirl dqn; a wrong one lists the figure's)",
     )
     p.add_argument("--repeats", type=int, default=None, help="fig9: random demo sets (default 20)")
     p.set_defaults(func=_cmd_reproduce)

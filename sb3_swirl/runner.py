@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from swirl_wrappers._io import atomic_write
 from swirl_wrappers._validation import check_int, check_option
 
 __all__ = ["BACKENDS", "run_sweep"]
@@ -52,12 +53,37 @@ def _read_done(path: Path) -> dict[str, dict[str, Any]]:
     if not path.exists():
         return done
     for line in path.read_text().splitlines():
-        try:
+        if _is_record(line):  # not the last line of an interrupted write
             record = json.loads(line)
-        except json.JSONDecodeError:
-            continue  # the last line of an interrupted write
-        done[_key(record["job"])] = record
+            done[_key(record["job"])] = record
     return done
+
+
+def _resumed(path: Path, done: Mapping[str, Mapping[str, Any]]) -> None:
+    """Say what a resumed sweep keeps from ``path``; drop a line cut short by a crash (it is
+    rewritten atomically with the whole records, so the file stays one record per line)."""
+    from rich.console import Console
+
+    text = path.read_text()
+    lines = [line for line in text.splitlines() if line.strip()]
+    broken = sum(1 for line in lines if not _is_record(line))
+    if broken or (text and not text.endswith("\n")):
+        with atomic_write(path) as fh:
+            fh.writelines(line + "\n" for line in lines if _is_record(line))
+    Console(stderr=True).print(
+        f"{path}: kept {len(done)} run{'s' * (len(done) != 1)} done before (--resume)"
+        + (f"; dropped {broken} line{'s' * (broken != 1)} cut short by a crash" if broken else ""),
+        soft_wrap=True,
+    )
+
+
+def _is_record(line: str) -> bool:
+    """Whether ``line`` of a runs file is whole JSON (a crash can cut the last one short)."""
+    try:
+        json.loads(line)
+    except json.JSONDecodeError:
+        return False
+    return True
 
 
 def _warn_other_settings(
@@ -199,9 +225,8 @@ def run_sweep(
     if not os.access(path if path.exists() else path.parent, os.W_OK):  # before any run
         raise ValueError(f"cannot write {path}: no permission to append the runs' records")
     done = _read_done(path)
-    if path.exists() and not path.read_bytes().endswith(b"\n") and path.stat().st_size:
-        with path.open("a") as fh:  # end a line cut short, or the next record would join it
-            fh.write("\n")
+    if path.exists():
+        _resumed(path, done)
     unique = {_key(job): dict(job) for job in jobs}
     pending = [job for key, job in unique.items() if key not in done]
     if stamp is not None:
