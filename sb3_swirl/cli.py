@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
+import signal
 import sys
+import threading
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -594,6 +597,28 @@ def _warning_printer(say: Callable[[str], str]) -> Callable[..., None]:
     return show
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, ``timeout``, a job scheduler) taken as Ctrl-C is."""
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """While a command runs, SIGTERM stops it as Ctrl-C does: a sweep stops its workers (killed
+    outright, its joblib workers would go on running their jobs) and no file is half-written."""
+    if threading.current_thread() is not threading.main_thread():  # only there can it be set
+        yield
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        raise _Terminated
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sb3-swirl`` command."""
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -604,7 +629,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     say = _as_flags if args.func is _cmd_fit else str
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _terminate_as_interrupt():
             warnings.showwarning = _warning_printer(say)
             return args.func(args)
     # OSError: a path that is a folder, unwritable...; ImportError: an optional extra missing
@@ -612,9 +637,9 @@ def main(argv: list[str] | None = None) -> int:
         # soft_wrap: never break a path a user may copy; escape: paths may contain [brackets]
         console.print(f"[bold red]error:[/] {escape(say(str(exc)))}", soft_wrap=True)
         return 2
-    except KeyboardInterrupt:  # Ctrl-C: files are written atomically, none is left half-done
-        console.print("interrupted", soft_wrap=True)
-        return 130
+    except KeyboardInterrupt as exc:  # files are written atomically: none is left half-done
+        console.print("terminated" if isinstance(exc, _Terminated) else "interrupted")
+        return 128 + (signal.SIGTERM if isinstance(exc, _Terminated) else signal.SIGINT)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """The ``sb3-swirl`` command line and the main job, run as a user would (tiny budgets)."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -323,6 +324,68 @@ def test_ctrl_c_in_the_middle_of_a_real_run(tmp_path):
     assert proc.wait(timeout=30) == 130
     assert rest.strip() == "interrupted"
     assert list(tmp_path.iterdir()) == []
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (Linux's /proc)."""
+    children = []
+    for status in Path("/proc").glob("[0-9]*/status"):
+        try:
+            fields = dict(line.split(":\t", 1) for line in status.read_text().splitlines())
+        except (OSError, ValueError):  # gone meanwhile
+            continue
+        if int(fields.get("PPid", "0")) == pid:
+            children.append(int(status.parent.name))
+    return children
+
+
+def _alive(pid: int) -> bool:
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return "\tZ" not in status.split("State:", 1)[1][:4]  # a zombie has stopped
+
+
+def test_sigterm_stops_a_sweep_and_its_workers(tmp_path):
+    """``kill`` (or a scheduler's time limit) on a running sweep: exit 143, one line, and its
+    joblib workers stop too (killed outright, they went on running their jobs, orphaned)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    command = ["reproduce", "fig2", "--quick", "--panels", "parking", "--out", str(tmp_path)]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sb3_swirl.cli", *command, "-q"],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert "Fig. 2" in proc.stderr.readline()  # the work starts after the imports
+    workers: list[int] = []
+    for _ in range(300):  # until the two workers have started (steps of 0.1 s)
+        workers = [pid for pid in _children(proc.pid) if "LokyProcess" in _cmdline(pid)]
+        if len(workers) == 2:
+            break
+        time.sleep(0.1)
+    assert len(workers) == 2, workers
+    time.sleep(1.0)  # at work on their runs
+    proc.send_signal(signal.SIGTERM)
+    rest = proc.stderr.read()
+    assert proc.wait(timeout=60) == 143
+    assert rest.strip().splitlines()[-1] == "terminated", rest
+    for _ in range(100):
+        if not any(_alive(pid) for pid in workers):
+            break
+        time.sleep(0.1)
+    assert not any(_alive(pid) for pid in workers)
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
 
 
 def test_fit_auto_prints_which_indicator_it_kept(tmp_path, capsys):
