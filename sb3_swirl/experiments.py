@@ -30,7 +30,8 @@ from rich.table import Table
 from swirl_wrappers._io import atomic_write
 from swirl_wrappers._validation import check_int, check_option
 
-console = Console(stderr=True)
+#: progress and summaries; 160 columns when piped to a log, so no title is cut at 80
+console = Console(stderr=True, width=None if sys.stderr.isatty() else 160)
 
 
 def _table_console() -> Console:
