@@ -1733,6 +1733,7 @@ def _plot_experiment(
         ends: list[float] = []  # the rollouts each learning curve ran
         banded = False  # a shaded band over more than one seed was drawn
         width = 0.8 / len(methods)
+        drawn: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # each line's points, by label
         for i, label in enumerate(methods):
             these = [r for r in mine if r["label"] == label]
             if not these:  # a method the panel skips
@@ -1754,7 +1755,7 @@ def _plot_experiment(
                     # the value on each bar: a method at 0 is otherwise not there to see
                     ax.bar_label(ax.bar(where, mean, width, **bars), fmt="%.2f", fontsize=7)
                 else:
-                    ax.plot(xs, mean, label=text, **style)
+                    ax.plot(xs, mean, label=_same_as_drawn(drawn, text, xs, mean), **style)
                     ax.fill_between(xs, low, high, color=color, alpha=0.15)
                     banded |= any(len(f) > 1 for f in finals)
                 continue
@@ -1764,9 +1765,11 @@ def _plot_experiment(
             key = experiment.x_key
             episodes = np.array([[p[key] for p in c[:n]] for c in curves]).mean(axis=0)
             if n == 1:  # behavioural cloning: no rollouts
-                ax.axhline(success.mean(), linestyle="--", color=color, label=text)
+                level = _same_as_drawn(drawn, text, [], [success.mean()])
+                ax.axhline(success.mean(), linestyle="--", color=color, label=level)
                 continue
-            ax.plot(episodes, success.mean(axis=0), label=text, **style)
+            mean = success.mean(axis=0)
+            ax.plot(episodes, mean, label=_same_as_drawn(drawn, text, episodes, mean), **style)
             band = _band(success, experiment.spread)
             ax.fill_between(episodes, *band, color=color, alpha=0.15)
             banded |= len(success) > 1
@@ -1793,6 +1796,18 @@ def _plot_experiment(
         title = f"{title}\n{_quick_note(experiment)}"
     fig.suptitle(title, fontsize="medium")
     _finish(fig, path)
+
+
+def _same_as_drawn(
+    drawn: dict[str, tuple[np.ndarray, np.ndarray]], text: str, x: Any, y: Any
+) -> str:
+    """A line's legend ``text``, naming the methods in ``drawn`` (label -> points, this line
+    added) whose lines are the very same, hidden under it: a --quick run's few runs often all
+    end at 0 or 1."""
+    points = (np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    same = [t for t, p in drawn.items() if all(map(np.array_equal, p, points))]
+    drawn[text] = points
+    return f"{text} (= {', '.join(same)})" if same else text
 
 
 def reproduce_all(*, quick: bool = False, out_dir: str | Path = "results", **sweep: Any) -> dict:

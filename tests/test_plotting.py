@@ -103,3 +103,14 @@ def test_the_same_plot_saves_the_same_bytes(fitted, tmp_path, suffix):
     plot_rewards(task, path=first)
     plot_rewards(task, path=second)
     assert first.read_bytes() == second.read_bytes()
+
+
+def test_a_figure_legend_names_methods_hidden_under_the_same_line():
+    from sb3_swirl.experiments import _same_as_drawn
+
+    drawn: dict = {}
+    assert _same_as_drawn(drawn, "SWIRL", [2, 5], [1.0, 1.0]) == "SWIRL"
+    assert _same_as_drawn(drawn, "DQN", [2, 5], [1.0, 0.5]) == "DQN"  # apart at one point
+    assert _same_as_drawn(drawn, "BC", [2, 5], [1.0, 1.0]) == "BC (= SWIRL)"
+    assert _same_as_drawn(drawn, "RBF", [2, 5, 9], [1.0, 1.0, 1.0]) == "RBF"  # other points
+    assert _same_as_drawn(drawn, "SVM", [2, 5], [1.0, 1.0]) == "SVM (= SWIRL, BC)"
