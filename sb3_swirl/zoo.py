@@ -326,6 +326,9 @@ class SwirlTaskWrapper(SwirlWrapper):
 # SWIRL's own settings: in the wrapper (fit, reward) and in SwirlDQN (BC)
 _WRAPPER_PARAMS = {"reg_covar": "fit", "task_reward_weight": "reward_config"}
 _SWIRL_PARAMS = {*_WRAPPER_PARAMS, "bc_epochs", "demo_loss_coef"}
+# the settings -optimize samples beyond DQN's; without reg_covar for an entry that reads a
+# fitted task (``task:``), which is not refitted (set by ``_train``)
+_SAMPLED = {"reg_covar": True}
 
 
 def _route_trial_params(params: dict[str, Any]) -> dict[str, Any]:
@@ -351,7 +354,8 @@ def sample_swirl_dqn_params(
     from rl_zoo3.hyperparams_opt import sample_dqn_params
 
     params = sample_dqn_params(trial, n_actions, n_envs, additional_args)
-    params["reg_covar"] = trial.suggest_float("reg_covar", 1e-4, 1.0, log=True)
+    if _SAMPLED["reg_covar"]:
+        params["reg_covar"] = trial.suggest_float("reg_covar", 1e-4, 1.0, log=True)
     params["task_reward_weight"] = trial.suggest_float("task_reward_weight", 1.0, 100.0, log=True)
     params["bc_epochs"] = trial.suggest_categorical("bc_epochs", [0, 100, 300])
     params["demo_loss_coef"] = trial.suggest_float("demo_loss_coef", 0.0, 2.0)
@@ -450,23 +454,25 @@ def check_config(
     _check_keys("-params", overrides, allowed | _WRAPPER_PARAMS.keys())  # for "did you mean"
     _check_keys(where, entry, allowed)
     entry = {**entry, **overrides}
-    wrappers = entry.get("env_wrapper") or []
-    wrappers = list(wrappers) if isinstance(wrappers, list) else [wrappers]
-    ours = [
-        i
-        for i, w in enumerate(wrappers)
-        if isinstance(w, Mapping) and str(next(iter(w))).endswith(".SwirlTaskWrapper")
-    ]
-    specs = [dict(next(iter(wrappers[i].values())) or {}) for i in ours]
+    wrappers, ours, specs = _swirl_wrappers(entry)
     if swirl:
         if not specs:
             raise ValueError(
                 f"-params {', '.join(swirl)}: settings of the SwirlTaskWrapper, which {where} "
                 "does not have"
             )
+        if "reg_covar" in swirl and any(spec.get("task") for spec in specs):
+            raise ValueError(
+                f"-params reg_covar: {where} reads a fitted task (task: ...), which is not "
+                "refitted; fit it again with `sb3-swirl fit --reg-covar`, or give the entry "
+                "demos and fit: {reg_covar: ...} instead of task"
+            )
+    if specs and "gamma" in overrides:  # potential shaping keeps the policy only with the
+        swirl["gamma"] = overrides["gamma"]  # agent's gamma (-optimize's trials do the same)
+    if swirl and specs:
         for i, spec in zip(ours, specs, strict=True):
             for key, value in swirl.items():
-                section = _WRAPPER_PARAMS[key]
+                section = _WRAPPER_PARAMS.get(key, "reward_config")
                 spec[section] = {**(spec.get(section) or {}), key: value}
             wrappers[i] = {next(iter(wrappers[i])): spec}
         entry["env_wrapper"] = wrappers  # what rl_zoo3 gets and saves in config.yml
@@ -510,6 +516,19 @@ def check_config(
     finally:
         env.close()
     return dict(entry)
+
+
+def _swirl_wrappers(entry: Mapping[str, Any]) -> tuple[list[Any], list[int], list[dict]]:
+    """An entry's ``env_wrapper`` list, the positions of its SwirlTaskWrappers in it, and
+    (copies of) their settings."""
+    wrappers = entry.get("env_wrapper") or []
+    wrappers = list(wrappers) if isinstance(wrappers, list) else [wrappers]
+    ours = [
+        i
+        for i, w in enumerate(wrappers)
+        if isinstance(w, Mapping) and str(next(iter(w))).endswith(".SwirlTaskWrapper")
+    ]
+    return wrappers, ours, [dict(next(iter(wrappers[i].values())) or {}) for i in ours]
 
 
 @contextlib.contextmanager
@@ -584,8 +603,11 @@ def _train(argv: list[str]) -> int:
         except ValueError as exc:  # before anything trains: one clear line, no traceback
             print(f"error: {exc}", file=sys.stderr)
             return 2
-        if _WRAPPER_PARAMS.keys() & (overrides or {}).keys():
+        given = (overrides or {}).keys()
+        specs = _swirl_wrappers(entry)[2]
+        if specs and (_WRAPPER_PARAMS.keys() | {"gamma"}) & given:
             argv = _wrapper_params_routed(argv, entry["env_wrapper"])
+        _SAMPLED["reg_covar"] = not any(spec.get("task") for spec in specs)
         # rl_zoo3 2.9 gives an entry's env_kwargs to the training env only (its eval env and
         # `enjoy` get those of the command line): pass them on the command line too
         if entry.get("env_kwargs") and _option(argv, "--env-kwargs") is None:
@@ -597,7 +619,7 @@ def _train(argv: list[str]) -> int:
                 flush=True,
             )
     try:
-        with _task_saved_with_each_run():
+        with _task_saved_with_each_run(), _trial_zero_loaded():
             _run(train, "train", argv)
     # a setting the algorithm refuses (SB3 asserts some), before training: one line
     except (ValueError, AssertionError) as exc:
@@ -679,6 +701,34 @@ def _task_saved_with_each_run() -> Iterator[None]:
         yield
     finally:
         ExperimentManager.learn = learn
+
+
+@contextlib.contextmanager
+def _trial_zero_loaded() -> Iterator[None]:
+    """``--trial-id 0`` trains Optuna's first trial: rl_zoo3 2.9.2 tests the id as a truth
+    value, so it trained the entry's own settings, silently. Its trial goes in as rl_zoo3
+    would put it (before ``-params``, which still override it)."""
+    from rl_zoo3.exp_manager import ExperimentManager
+
+    read = ExperimentManager.read_hyperparameters
+
+    def read_with_trial_zero(manager: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+        if manager.trial_id != 0 or not (manager.storage and manager.study_name):
+            return read(manager)
+        print("sb3-swirl: loading trial 0 from the Optuna study", flush=True)
+        custom = manager.custom_hyperparams
+        trial = manager.load_trial(manager.storage, manager.study_name, 0)
+        manager.custom_hyperparams = {**trial, **(custom or {})}
+        try:
+            return read(manager)
+        finally:
+            manager.custom_hyperparams = custom
+
+    ExperimentManager.read_hyperparameters = read_with_trial_zero
+    try:
+        yield
+    finally:
+        ExperimentManager.read_hyperparameters = read
 
 
 def _saved_task(model_path: str) -> TaskModel:

@@ -203,7 +203,8 @@ def test_a_tuned_trials_swirl_settings_are_given_with_params_and_saved(tmp_path,
     """-params reg_covar:... task_reward_weight:... (the -optimize report's names) reach the
     SwirlTaskWrapper's fit and reward_config, and the run's config.yml says so."""
     zoo_cli("train", "--algo", "swirl_dqn", "--env", PARKING, "-f", "logs", "-n", "100",
-            "-params", "reg_covar:0.3", "bc_epochs:1", "task_reward_weight:2.0")  # fmt: skip
+            "-params", "reg_covar:0.3", "bc_epochs:1", "task_reward_weight:2.0",
+            "gamma:0.98")  # fmt: skip
     params = tmp_path / "logs/swirl_dqn/sb3_swirl-ParallelParking-v0_1/sb3_swirl-ParallelParking-v0"
     config = dict(yaml.load((params / "config.yml").read_text(), Loader=yaml.UnsafeLoader))
     spec = config["env_wrapper"][0]["sb3_swirl.zoo.SwirlTaskWrapper"]
@@ -213,9 +214,11 @@ def test_a_tuned_trials_swirl_settings_are_given_with_params_and_saved(tmp_path,
         and spec["reward_config"]["mode"] == "potential"
     )
     assert config["bc_epochs"] == 1
+    # gamma goes to the agent and to the shaping, as a trial's does (no mismatch warning)
+    assert config["gamma"] == 0.98 and spec["reward_config"]["gamma"] == 0.98
     task = sb3_swirl.TaskModel.from_json(params / "task.json")
     assert task.metadata["segmentation"]["params"]["reg_covar"] == 0.3
-    assert task.reward_config.task_reward_weight == 2.0
+    assert task.reward_config.task_reward_weight == 2.0 and task.reward_config.gamma == 0.98
 
 
 @pytest.mark.parametrize(
@@ -326,11 +329,27 @@ def test_optimize_two_trials_writes_the_study(tmp_path, zoo_cli):
         "0",
     ]
     args += ["-optimize", "--n-trials", "2", "--n-evaluations", "1", "--eval-episodes", "2"]
-    zoo_cli(*args, "--no-optim-plots", "--sampler", "random", "--pruner", "none")
+    study = ["--storage", "sqlite:///study.db", "--study-name", "s"]
+    zoo_cli(*args, *study, "--no-optim-plots", "--sampler", "random", "--pruner", "none")
     (report,) = (tmp_path / "logs/swirl_dqn").glob("report_*.csv")
     text = report.read_text()
     assert "params_reg_covar" in text and "params_bc_epochs" in text
     assert len(text.strip().splitlines()) == 3  # header + 2 trials
+    # trial 0 trains its own settings (rl_zoo3 alone took id 0 for none, and trained the
+    # entry's); -params still override it
+    base = ["train", "--algo", "swirl_dqn", "--env", PARKING, "-f", "logs", "-n", "100"]
+    out = zoo_cli(*base, *study, "--trial-id", "0", "-params", "bc_epochs:1")
+    assert "loading trial 0 from the Optuna study" in out
+    import optuna
+
+    trial = optuna.load_study(study_name="s", storage=f"sqlite:///{tmp_path}/study.db").trials[0]
+    runs = (tmp_path / "logs/swirl_dqn").glob("*_[0-9]*/sb3_swirl-ParallelParking-v0")
+    run = max(runs, key=lambda p: int(p.parent.name.rsplit("_", 1)[1]))  # the latest
+    config = dict(yaml.load((run / "config.yml").read_text(), Loader=yaml.UnsafeLoader))
+    assert config["learning_rate"] == trial.params["learning_rate"] and config["bc_epochs"] == 1
+    task = sb3_swirl.TaskModel.from_json(run / "task.json")
+    assert task.metadata["segmentation"]["params"]["reg_covar"] == trial.params["reg_covar"]
+    assert task.reward_config.task_reward_weight == trial.params["task_reward_weight"]
 
 
 def test_a_trials_swirl_settings_reach_the_wrapper_and_the_agent():
@@ -368,6 +387,40 @@ def test_a_trials_swirl_settings_reach_the_wrapper_and_the_agent():
     assert task.metadata["segmentation"]["params"]["reg_covar"] == 0.05
     model = sb3_swirl.SwirlDQN("MlpPolicy", env, **params)
     assert len(model.demonstrations) == 3
+
+
+def test_an_entry_with_a_fitted_task_is_tuned_without_refitting(tmp_path, monkeypatch, capsys):
+    """-optimize does not sample reg_covar for an entry that reads a fitted task (it would not
+    refit it, and the wrapper refuses a fit beside a task); -params reg_covar is refused."""
+    import optuna
+
+    monkeypatch.chdir(tmp_path)
+    _mountaincar_demos(tmp_path / "mountaincar_demos.npz", n=3)
+    demos = sb3_swirl.load_demos(tmp_path / "mountaincar_demos.npz")
+    sb3_swirl.fit_task(demos, indicator="velocity").to_json(tmp_path / "task.json")
+    spec = {"demos": "mountaincar_demos.npz", "task": "task.json"}
+    entry = MOUNTAINCAR_ENTRY | {"env_wrapper": [{"sb3_swirl.zoo.SwirlTaskWrapper": spec}]}
+    (tmp_path / "mine.yml").write_text(yaml.safe_dump({"MountainCar-v0": entry}))
+    args = ["train", "--algo", "swirl_dqn", "--env", "MountainCar-v0", "-conf", "mine.yml"]
+    assert zoo.main([*args, "-f", "logs", "-n", "100", "-params", "reg_covar:0.3"]) == 2
+    err = capsys.readouterr().err
+    assert "-params reg_covar: mine.yml, entry 'MountainCar-v0' reads a fitted task" in err
+    # the flag _train sets from the entry: the sampler then asks for no reg_covar
+    sampled = {"learning_rate": 1e-3, "exploration_final_eps": 0.1, "exploration_fraction": 0.1}
+    sampled |= {"one_minus_gamma": 0.01, "batch_size_pow": 5, "train_freq": 4}
+    sampled |= {"subsample_steps": 1, "target_update_interval": 100, "net_arch": "small"}
+    sampled |= {"task_reward_weight": 3.0, "bc_epochs": 0, "demo_loss_coef": 0.5}
+    her = {"using_her_replay_buffer": False}
+    monkeypatch.setitem(zoo._SAMPLED, "reg_covar", False)
+    try:  # a FixedTrial fails on a parameter it does not hold
+        zoo.sample_swirl_dqn_params(optuna.trial.FixedTrial(sampled), 0, 1, her)
+        assert zoo._TRIAL.fit == {} and zoo._TRIAL.reward_config["task_reward_weight"] == 3.0
+    finally:
+        zoo._TRIAL.__dict__.clear()
+    with pytest.raises(ValueError, match="reg_covar"):
+        monkeypatch.setitem(zoo._SAMPLED, "reg_covar", True)
+        zoo.sample_swirl_dqn_params(optuna.trial.FixedTrial(sampled), 0, 1, her)
+    zoo._TRIAL.__dict__.clear()
 
 
 def test_an_unknown_zoo_script_is_named(capsys):
