@@ -622,10 +622,14 @@ def _terminate_as_interrupt() -> Iterator[None]:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sb3-swirl`` command."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ["zoo"]:  # rl_zoo3 parses its own arguments
+    if argv[:1] == ["zoo"]:  # rl_zoo3 parses its own arguments, and prints its own errors
         from sb3_swirl.zoo import main as zoo_main
 
-        return zoo_main(argv[1:])
+        try:  # Ctrl-C while training: rl_zoo3 saves the model so far and exits 0
+            with _terminate_as_interrupt():
+                return zoo_main(argv[1:])
+        except KeyboardInterrupt as exc:
+            return _interrupted(exc)
     args = build_parser().parse_args(argv)
     say = _as_flags if args.func is _cmd_fit else str
     try:
@@ -638,8 +642,13 @@ def main(argv: list[str] | None = None) -> int:
         console.print(f"[bold red]error:[/] {escape(say(str(exc)))}", soft_wrap=True)
         return 2
     except KeyboardInterrupt as exc:  # files are written atomically: none is left half-done
-        console.print("terminated" if isinstance(exc, _Terminated) else "interrupted")
-        return 128 + (signal.SIGTERM if isinstance(exc, _Terminated) else signal.SIGINT)
+        return _interrupted(exc)
+
+
+def _interrupted(exc: KeyboardInterrupt) -> int:
+    """Say how a command was stopped (Ctrl-C, or SIGTERM); its exit status."""
+    console.print("terminated" if isinstance(exc, _Terminated) else "interrupted")
+    return 128 + (signal.SIGTERM if isinstance(exc, _Terminated) else signal.SIGINT)
 
 
 if __name__ == "__main__":

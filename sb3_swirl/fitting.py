@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import functools
 import inspect
 from collections.abc import Callable, Sequence
@@ -181,9 +182,14 @@ def fit_task(
     reward_params = set(inspect.signature(reward_cls).parameters)
     unknown = set(kwargs) - seg_params - reward_params
     if unknown:
+        known = sorted(seg_params | reward_params)
+        close = {k: difflib.get_close_matches(k, known, n=1) for k in sorted(unknown)}
+        guess = ", ".join(f"{m[0]!r} for {k!r}" for k, m in close.items() if m)
         raise TypeError(
-            f"fit_task() got unexpected keyword arguments {sorted(unknown)}; segmentation takes "
-            f"{sorted(seg_params)}, the reward learner {sorted(reward_params)}"
+            f"fit_task() got unexpected keyword arguments {sorted(unknown)}"
+            + (f" (did you mean {guess}?)" if guess else "")
+            + f"; segmentation takes {sorted(seg_params)}, the reward learner "
+            f"{sorted(reward_params)}"
         )
     segmenter = _build(
         segmentation,

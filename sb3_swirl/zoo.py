@@ -633,6 +633,17 @@ def _train(argv: list[str]) -> int:
             )
         print(f"error: {str(exc) or type(exc).__name__}{hint}", file=sys.stderr)
         return 2
+    except KeyError as exc:  # SB3's Monitor logs an info key the env does not give
+        frames = traceback.extract_tb(exc.__traceback__)
+        if not frames or Path(frames[-1].filename).parts[-2:] != ("common", "monitor.py"):
+            raise
+        print(
+            f"error: monitor_kwargs: the entry logs info key {exc} at each episode's end, "
+            f"which {env_id} does not put in its info: drop it from info_keywords (an entry "
+            "merged from a shipped one, <<: *parking, inherits ('is_success',))",
+            file=sys.stderr,
+        )
+        return 2
     return 0
 
 
@@ -761,8 +772,9 @@ def _runs_with_a_model(argv: list[str], env_id: str) -> str:
     if not ids:
         return ""
     return (
-        "; the latest run holds no final model (refused or stopped before it ended?). Runs "
-        f"that hold one: --exp-id {', '.join(map(str, ids))}"
+        "; the latest run holds no final model (refused, stopped before it ended, or an "
+        "-optimize study's, which keeps none?). Runs that hold one: --exp-id "
+        f"{', '.join(map(str, ids))}"
     )
 
 

@@ -91,7 +91,7 @@ def test_estimators_and_kwargs_are_routed(demos):
     assert not hasattr(tsc, "regions_")  # the given instance is cloned, not fitted in place
     assert task.metadata["segmentation"]["params"]["indicator"] == "velocity"
     assert task.metadata["reward"]["params"]["metric"] == "euclidean"
-    with pytest.raises(TypeError, match="unexpected keyword arguments"):
+    with pytest.raises(TypeError, match=r"arguments \['windw'\] \(did you mean 'window' for"):
         fit_task(demos, windw=3)
     with pytest.raises(TypeError, match="cannot be combined"):
         fit_task(demos, segmentation=tsc, window=3)

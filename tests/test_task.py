@@ -516,7 +516,7 @@ def test_a_wrappers_reward_config_dict_changes_only_the_fields_it_names():
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"mode": "exp"}, "reward mode"),
+        ({"mode": "exp"}, "reward_config mode must be one of"),
         ({"mode": "potential", "task_reward_weight": 0.0}, "task_reward_weight > 0"),
         ({"gamma": 1.5}, r"gamma must be a finite number in \[0, 1\]"),
         ({"scale": np.nan}, "reward scale"),

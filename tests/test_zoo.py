@@ -300,6 +300,21 @@ def test_bad_params_are_one_line_naming_the_option(tmp_path, monkeypatch, capsys
     assert message in err and "Traceback" not in err and "mine.yml" not in err, err
 
 
+def test_logging_an_info_key_the_env_lacks_is_one_line(tmp_path, monkeypatch, capsys):
+    """An entry copied from a shipped one logs is_success, which MountainCar does not give:
+    SB3's Monitor fails at the first episode's end, said in one line naming the key."""
+    monkeypatch.chdir(tmp_path)
+    _mountaincar_demos(tmp_path / "mountaincar_demos.npz", n=2)
+    entry = MOUNTAINCAR_ENTRY | {"monitor_kwargs": "dict(info_keywords=('is_success',))"}
+    (tmp_path / "mine.yml").write_text(yaml.safe_dump({"MountainCar-v0": entry}))
+    args = ["train", "--algo", "swirl_dqn", "--env", "MountainCar-v0", "-conf", "mine.yml"]
+    params = ["-params", "bc_epochs:1", "pretrain_td_steps:0", "learning_starts:1000"]
+    assert zoo.main([*args, "-f", "logs", "-n", "300", "--eval-freq", "-1", *params]) == 2
+    err = capsys.readouterr().err
+    assert "monitor_kwargs: the entry logs info key 'is_success'" in err, err
+    assert "Traceback" not in err
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [

@@ -211,7 +211,7 @@ class RewardConfig:
     gamma: float = 0.99
 
     def __post_init__(self) -> None:
-        check_option("reward mode", self.mode, REWARD_MODES)
+        check_option("reward_config mode", self.mode, REWARD_MODES)
         weight = self.task_reward_weight
         if weight is None:
             weight = 1.0 if self.mode == "potential" else 0.0
