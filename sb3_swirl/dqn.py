@@ -750,6 +750,12 @@ class SwirlDQN(DQN):
         if self.prefill_replay:
             self._prefill(data)
         if self.pretrain_td_steps:
+            if self.verbose >= 1:
+                print(
+                    f"SwirlDQN: {self.pretrain_td_steps} TD updates on the demo transitions "
+                    "before the first env step (pretrain_td_steps)",
+                    flush=True,
+                )
             self._pretrain_td()
         return info
 

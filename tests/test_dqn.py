@@ -432,6 +432,23 @@ def test_pretrain_td_steps_start_q_at_the_demos_returns_and_keep_the_clone():
     assert errors[4000] < 0.3 * errors[0]
 
 
+def test_verbose_says_what_runs_before_the_first_env_step(capsys):
+    model = SwirlDQN(
+        "MlpPolicy",
+        point_env(),
+        demonstrations=point_demos(2),
+        prefill_replay=True,
+        pretrain_td_steps=20,
+        bc_epochs=2,
+        verbose=1,
+        seed=0,
+    )
+    model.pretrain()
+    out = " ".join(capsys.readouterr().out.split())
+    assert "over 2 epochs (behavioural cloning)" in out and "BC accuracy" in out
+    assert "20 TD updates on the demo transitions before the first env step" in out
+
+
 def test_potential_shaping_with_another_gamma_warns():
     with pytest.warns(UserWarning, match="policy-invariant only when they are equal"):
         SwirlDQN("MlpPolicy", point_env(reward_config={"mode": "potential", "gamma": 0.9}))
