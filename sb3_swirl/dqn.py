@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import numpy as np
@@ -29,6 +31,7 @@ from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.inverse_dynamics import InverseDynamics
 from sb3_swirl.vec_env import get_swirl_attr, same_task
 from swirl_wrappers import Lifter, RewardConfig, SegmentTracker, TaskModel
+from swirl_wrappers._io import atomic_write
 from swirl_wrappers._validation import check_bool, check_int, check_option, check_real
 from swirl_wrappers.wrappers import (
     GOAL_KEY,
@@ -100,6 +103,20 @@ def check_discrete_actions(space: spaces.Space, *, from_zero: bool = True) -> No
             f"a + {int(space.start)}, with its action_space Discrete({space.n}), and record the "
             "demos' actions in that range"
         )
+
+
+def _atomic_save(path: Any, suffix: str, write: Any) -> None:
+    """``write(file)`` to ``path`` (``.suffix`` added when it has none, as SB3 does, and its
+    folders made) through :func:`~swirl_wrappers._io.atomic_write`; a file object as it is."""
+    if not isinstance(path, str | os.PathLike):
+        write(path)
+        return
+    target = Path(path)
+    if target.suffix == "":
+        target = Path(f"{target}.{suffix}")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(target, "wb") as fh:
+        write(fh)
 
 
 class SwirlDQN(DQN):
@@ -877,6 +894,39 @@ class SwirlDQN(DQN):
     def _record(self, key: str, value: float) -> None:
         if hasattr(self, "_logger"):
             self.logger.record(key, value)
+
+    def save(
+        self,
+        path: Any,
+        exclude: Sequence[str] | None = None,
+        include: Sequence[str] | None = None,
+    ) -> None:
+        """SB3's ``save``, written atomically: a failure part-way (Ctrl-C, a full disk) leaves
+        the file it replaces as it was, and a path that is a folder is an error (SB3 writes
+        ``PATH_2`` instead, where a replay buffer saved to the same path would land too). As in
+        SB3, ``.zip`` is added to a path without a suffix and missing folders are made."""
+        _atomic_save(path, "zip", lambda fh: super(SwirlDQN, self).save(fh, exclude, include))
+
+    def save_replay_buffer(self, path: Any) -> None:
+        """SB3's ``save_replay_buffer``, written atomically as :meth:`save` is (``.pkl``)."""
+        _atomic_save(path, "pkl", lambda fh: super(SwirlDQN, self).save_replay_buffer(fh))
+
+    @classmethod
+    def load(cls, path: Any, *args: Any, **kwargs: Any) -> SwirlDQN:  # type: ignore[override]
+        """SB3's ``load``; a zip that holds no SWIRL task (a plain DQN's) is refused, naming
+        the file, rather than giving a SwirlDQN that knows no segments."""
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            model = super().load(path, *args, **kwargs)
+        for warning in caught:  # said where the user called load
+            warnings.warn(warning.message, warning.category, stacklevel=2)
+        if model.task_json is None:
+            raise ValueError(
+                f"{os.fspath(path) if isinstance(path, str | os.PathLike) else path} holds no "
+                "SWIRL task: not a SwirlDQN model (a plain DQN's loads with "
+                "stable_baselines3.DQN.load)"
+            )
+        return model
 
     def _excluded_save_params(self) -> list[str]:
         # Before BC the demonstrations are saved (a loaded model still starts with BC); after

@@ -261,6 +261,42 @@ def test_a_model_saved_before_learning_keeps_its_demonstrations(tmp_path):
     assert loaded._bc_done and loaded.bc_n_pairs_ > 0
 
 
+def test_save_is_atomic_and_refuses_a_folder_and_load_a_plain_dqn(tmp_path, monkeypatch):
+    """A save cut short (Ctrl-C, a full disk) leaves the model it replaces; a folder is an
+    error, not PATH_2; a zip that holds no SWIRL task is refused at load, naming it."""
+    from stable_baselines3 import DQN
+
+    model = SwirlDQN("MlpPolicy", point_env(), bc_epochs=0, seed=0)
+    model.save(tmp_path / "models" / "model")  # as in SB3: .zip added, the folder made
+    path = tmp_path / "models" / "model.zip"
+    before = path.read_bytes()
+    other = SwirlDQN("MlpPolicy", point_env(), bc_epochs=0, seed=1)
+
+    def cut(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(th, "save", cut)  # the policy's weights are written with torch.save
+    with pytest.raises(KeyboardInterrupt):
+        other.save(path)
+    monkeypatch.undo()
+    assert path.read_bytes() == before and sorted(p.name for p in path.parent.iterdir()) == [
+        "model.zip"
+    ]
+    obs = point_env().observation_space.sample()
+    assert SwirlDQN.load(path).predict(obs)[0] == model.predict(obs)[0]
+    (tmp_path / "folder.zip").mkdir()
+    with pytest.raises(IsADirectoryError, match=r"folder\.zip: it is a folder"):
+        model.save(tmp_path / "folder.zip")
+    with pytest.raises(IsADirectoryError, match="it is a folder"):
+        model.save_replay_buffer(tmp_path / "folder.zip")
+    assert not (tmp_path / "folder.zip_2").exists()
+    model.save_replay_buffer(tmp_path / "buffer")
+    model.load_replay_buffer(tmp_path / "buffer.pkl")
+    DQN("MlpPolicy", "CartPole-v1").save(tmp_path / "plain.zip")
+    with pytest.raises(ValueError, match=r"plain.zip holds no SWIRL task: not a SwirlDQN model"):
+        SwirlDQN.load(tmp_path / "plain.zip")
+
+
 def test_bc_under_vec_normalize_updates_the_statistics_with_the_demo_states():
 
     venv = VecNormalize(DummyVecEnv([point_env]), norm_reward=False)
