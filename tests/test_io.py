@@ -157,3 +157,15 @@ def test_atomic_write_writes_through_a_link_and_refuses_a_read_only_file(tmp_pat
         with atomic_write(tmp_path / "link.txt") as fh:
             fh.write("lost")
     assert (tmp_path / "real.txt").read_text() == "new"
+
+
+def test_a_read_only_folder_is_named_not_the_temporary_file(tmp_path, monkeypatch):
+    import tempfile
+
+    def refused(*args, **kwargs):  # what a folder the user may not write gives (not root)
+        raise PermissionError(13, "Permission denied", str(tmp_path / ".out.json.x.tmp"))
+
+    monkeypatch.setattr(tempfile, "mkstemp", refused)
+    with pytest.raises(PermissionError, match=r"out\.json: the folder .* is read-only$"):
+        with atomic_write(tmp_path / "out.json") as fh:
+            fh.write("lost")

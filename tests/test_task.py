@@ -307,6 +307,14 @@ def test_paths_that_look_like_json_are_read_as_files(tmp_path, monkeypatch):
         TaskModel.from_json(tmp_path / "{absent}.json")
 
 
+def test_a_task_saved_with_a_byte_order_mark_reads(tmp_path):
+    """An editor (Notepad) may save the JSON with a UTF-8 byte-order mark: file and text read."""
+    task = TASKS[sorted(TASKS)[0]]()
+    (tmp_path / "task.json").write_text(task.to_json(), encoding="utf-8-sig")
+    assert TaskModel.from_json(tmp_path / "task.json").to_dict() == task.to_dict()
+    assert TaskModel.from_json("\ufeff" + task.to_json()).to_dict() == task.to_dict()
+
+
 def test_missing_file_is_a_value_error(tmp_path):
     with pytest.raises(ValueError, match="cannot read task model file"):
         TaskModel.from_json(tmp_path / "absent.json")

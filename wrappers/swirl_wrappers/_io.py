@@ -30,8 +30,8 @@ def atomic_write(path: str | os.PathLike, mode: str = "w") -> Iterator[IO]:
     Raises
     ------
     IsADirectoryError, NotADirectoryError, FileNotFoundError, PermissionError
-        If ``path`` is a folder, its folder is a file, its folder does not exist or it is a
-        read-only file (named, before anything is written). A symbolic link is written
+        If ``path`` is a folder, its folder is a file, its folder does not exist, or it or its
+        folder is read-only (named, before anything is written). A symbolic link is written
         through: its target gets the new content.
 
     Examples
@@ -57,7 +57,10 @@ def atomic_write(path: str | os.PathLike, mode: str = "w") -> Iterator[IO]:
     target = os.path.join(folder, name)
     if os.path.exists(target) and not os.access(target, os.W_OK):
         raise PermissionError(f"cannot write {path}: the file is read-only")
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{name}.", suffix=".tmp")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{name}.", suffix=".tmp")
+    except PermissionError:  # named as the file asked for, not the temporary one
+        raise PermissionError(f"cannot write {path}: the folder {folder} is read-only") from None
     try:
         with os.fdopen(fd, mode, encoding="utf-8" if mode == "w" else None) as fh:
             os.chmod(tmp, 0o666 & ~_UMASK)

@@ -1002,11 +1002,11 @@ class TaskModel:
         if (
             isinstance(source, os.PathLike)
             or os.path.isfile(text)
-            or not text.lstrip().startswith(("{", "["))
+            or not text.lstrip("\ufeff \t\r\n").startswith(("{", "["))
         ):
             file = os.fspath(source) if isinstance(source, os.PathLike) else text
-            try:
-                with open(file, encoding="utf-8") as fh:
+            try:  # utf-8-sig: a file an editor saved with a byte-order mark reads too
+                with open(file, encoding="utf-8-sig") as fh:
                     text = fh.read()
             except OSError as exc:
                 raise ValueError(f"cannot read task model file {file}: {exc}") from exc
@@ -1016,7 +1016,7 @@ class TaskModel:
                     "text that TaskModel.to_json and `sb3-swirl fit` write"
                 ) from None
         try:
-            data = json.loads(text)
+            data = json.loads(text.lstrip("\ufeff"))
         except json.JSONDecodeError as exc:
             what = "task model" if file is None else f"task model file {file}"
             raise ValueError(f"{what} is not valid JSON (corrupted or truncated?): {exc}") from exc
