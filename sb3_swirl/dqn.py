@@ -911,6 +911,29 @@ class SwirlDQN(DQN):
         """SB3's ``save_replay_buffer``, written atomically as :meth:`save` is (``.pkl``)."""
         _atomic_save(path, "pkl", lambda fh: super(SwirlDQN, self).save_replay_buffer(fh))
 
+    def load_replay_buffer(self, path: Any, truncate_last_traj: bool = True) -> None:
+        """SB3's ``load_replay_buffer``; a buffer that does not fit this model (another number
+        of envs, other spaces: another env's or task's) is refused, naming the file, and the
+        model keeps its own (SB3 takes it, and ``learn`` fails deep inside the buffer)."""
+        own = self.replay_buffer
+        super().load_replay_buffer(path, truncate_last_traj)
+        buffer = self.replay_buffer
+        wrong = [
+            f"{what} {theirs} (this model: {ours})"
+            for what, theirs, ours in (
+                ("n_envs", buffer.n_envs, self.n_envs),
+                ("observation space", buffer.observation_space, self.observation_space),
+                ("action space", buffer.action_space, self.action_space),
+            )
+            if theirs != ours
+        ]
+        if wrong:
+            self.replay_buffer = own
+            raise ValueError(
+                f"{os.fspath(path) if isinstance(path, str | os.PathLike) else path}: the replay "
+                f"buffer does not fit this model: {'; '.join(wrong)}"
+            )
+
     @classmethod
     def load(cls, path: Any, *args: Any, **kwargs: Any) -> SwirlDQN:  # type: ignore[override]
         """SB3's ``load``; a zip that holds no SWIRL task (a plain DQN's) is refused, naming

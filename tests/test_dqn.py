@@ -292,6 +292,11 @@ def test_save_is_atomic_and_refuses_a_folder_and_load_a_plain_dqn(tmp_path, monk
     assert not (tmp_path / "folder.zip_2").exists()
     model.save_replay_buffer(tmp_path / "buffer")
     model.load_replay_buffer(tmp_path / "buffer.pkl")
+    two = SwirlDQN("MlpPolicy", DummyVecEnv([point_env, point_env]), bc_epochs=0, seed=0)
+    own = two.replay_buffer
+    with pytest.raises(ValueError, match=r"buffer\.pkl: the replay buffer does not fit.*n_envs 1"):
+        two.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert two.replay_buffer is own
     DQN("MlpPolicy", "CartPole-v1").save(tmp_path / "plain.zip")
     with pytest.raises(ValueError, match=r"plain.zip holds no SWIRL task: not a SwirlDQN model"):
         SwirlDQN.load(tmp_path / "plain.zip")
