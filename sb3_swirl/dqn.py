@@ -14,7 +14,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3 import DQN, HerReplayBuffer
 from stable_baselines3.common.type_aliases import GymEnv, Schedule
-from stable_baselines3.common.vec_env import VecFrameStack, unwrap_vec_wrapper
+from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, unwrap_vec_wrapper
 from stable_baselines3.dqn.policies import DQNPolicy
 from torch.nn import functional as F
 
@@ -29,7 +29,7 @@ from sb3_swirl.demos import (
 )
 from sb3_swirl.features import RBFFeaturesExtractor
 from sb3_swirl.inverse_dynamics import InverseDynamics
-from sb3_swirl.vec_env import get_swirl_attr, same_task
+from sb3_swirl.vec_env import get_swirl_attr, same_task, swirl_task
 from swirl_wrappers import Lifter, RewardConfig, SegmentTracker, TaskModel
 from swirl_wrappers._io import atomic_write
 from swirl_wrappers._validation import check_bool, check_int, check_option, check_real
@@ -103,6 +103,16 @@ def check_discrete_actions(space: spaces.Space, *, from_zero: bool = True) -> No
             f"a + {int(space.start)}, with its action_space Discrete({space.n}), and record the "
             "demos' actions in that range"
         )
+
+
+def _carries_task(env: Any) -> bool:
+    """Whether ``env`` (a gymnasium env or a VecEnv) is lifted by a SWIRL wrapper."""
+    if isinstance(env, VecEnv):
+        return swirl_task(env) is not None
+    try:
+        return isinstance(env.get_wrapper_attr("task"), TaskModel)
+    except AttributeError:  # a Fetch env's own `task` is a name, not a TaskModel
+        return False
 
 
 def _atomic_save(path: Any, suffix: str, write: Any) -> None:
@@ -938,6 +948,13 @@ class SwirlDQN(DQN):
     def load(cls, path: Any, *args: Any, **kwargs: Any) -> SwirlDQN:  # type: ignore[override]
         """SB3's ``load``; a zip that holds no SWIRL task (a plain DQN's) is refused, naming
         the file, rather than giving a SwirlDQN that knows no segments."""
+        name = os.fspath(path) if isinstance(path, str | os.PathLike) else path
+        env = kwargs.get("env", args[0] if args else None)
+        if env is not None and not _carries_task(env):  # SB3 would say its spaces differ
+            raise ValueError(
+                f"env= carries no SWIRL task: wrap it with the one {name} holds, "
+                f"`SwirlWrapper(env, SwirlDQN.load({name!r}).task)`, or load without env="
+            )
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             model = super().load(path, *args, **kwargs)
@@ -945,8 +962,7 @@ class SwirlDQN(DQN):
             warnings.warn(warning.message, warning.category, stacklevel=2)
         if model.task_json is None:
             raise ValueError(
-                f"{os.fspath(path) if isinstance(path, str | os.PathLike) else path} holds no "
-                "SWIRL task: not a SwirlDQN model (a plain DQN's loads with "
+                f"{name} holds no SWIRL task: not a SwirlDQN model (a plain DQN's loads with "
                 "stable_baselines3.DQN.load)"
             )
         return model

@@ -297,6 +297,9 @@ def test_save_is_atomic_and_refuses_a_folder_and_load_a_plain_dqn(tmp_path, monk
     with pytest.raises(ValueError, match=r"buffer\.pkl: the replay buffer does not fit.*n_envs 1"):
         two.load_replay_buffer(tmp_path / "buffer.pkl")
     assert two.replay_buffer is own
+    with pytest.raises(ValueError, match=r"env= carries no SWIRL task: wrap it with the one"):
+        SwirlDQN.load(path, env=PointEnv())  # SB3 said the spaces differ, in array dumps
+    assert SwirlDQN.load(path, DummyVecEnv([point_env])).task_json == model.task_json
     DQN("MlpPolicy", "CartPole-v1").save(tmp_path / "plain.zip")
     with pytest.raises(ValueError, match=r"plain.zip holds no SWIRL task: not a SwirlDQN model"):
         SwirlDQN.load(tmp_path / "plain.zip")
