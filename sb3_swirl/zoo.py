@@ -782,6 +782,14 @@ def _enjoy(argv: list[str]) -> int:
     from rl_zoo3.enjoy import enjoy
 
     env_id = str(_option(argv, "--env", default="CartPole-v1"))
+    exp_id = str(_option(argv, "--exp-id", default="0"))
+    if not exp_id.isdigit():
+        print(
+            f"error: --exp-id {exp_id!r}: give a run's number (the N of ENV_N in the log "
+            "folder), or 0 for the latest run",
+            file=sys.stderr,
+        )
+        return 2
     if _option(argv, "--algo") != "swirl_dqn":
         from huggingface_sb3 import EnvironmentName
 

@@ -181,6 +181,8 @@ def test_enjoy_names_the_runs_with_a_model_when_the_latest_has_none(tmp_path, mo
     assert "No model found" in error and "Runs that hold one: --exp-id 1" in error
     assert zoo.main([*enjoy, "--exp-id", "2"]) == 2  # asked for: no hint
     assert "Runs that hold one" not in capsys.readouterr().err
+    assert zoo.main([*enjoy, "--exp-id", "latest"]) == 2  # rl_zoo3 said "invalid literal"
+    assert "--exp-id 'latest': give a run's number" in capsys.readouterr().err
 
 
 def test_yaml_for_a_plain_gymnasium_env_with_a_demo_file(tmp_path, monkeypatch):
