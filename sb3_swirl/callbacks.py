@@ -278,7 +278,17 @@ class TaskEvalCallback(EvalCallback):
                 "policy reads the segment index of its regions): wrap it as the training env, "
                 "with the same task"
             )
-        super()._init_callback()  # after the check: it makes the log folders
+        folders = {
+            "best_model_save_path": self.best_model_save_path,
+            "log_path": None if self.log_path is None else os.path.dirname(self.log_path),
+        }
+        for name, folder in folders.items():
+            if folder and os.path.exists(folder) and not os.path.isdir(folder):
+                raise NotADirectoryError(
+                    f"TaskEvalCallback {name} {folder!r} is a file, not a folder: give the "
+                    "folder to write into"
+                )
+        super()._init_callback()  # after the checks: it makes the log folders
 
     def _on_training_start(self) -> None:
         if self.eval_at_start and not self.evaluations_timesteps:

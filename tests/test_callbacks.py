@@ -315,6 +315,17 @@ def test_task_eval_refuses_an_eval_env_with_another_task():
     model.learn(64, callback=TaskEvalCallback(point_env(reward_config={"scale": 2.0})))
 
 
+def test_task_eval_refuses_a_file_as_its_folders(tmp_path):
+    """SB3 failed in os.makedirs with a bare FileExistsError."""
+    model = PPO("MlpPolicy", point_env(), n_steps=64, batch_size=32, n_epochs=1, seed=0)
+    (tmp_path / "taken").write_text("a user's file")
+    for name in ("best_model_save_path", "log_path"):
+        callback = TaskEvalCallback(point_env(), eval_freq=64, **{name: str(tmp_path / "taken")})
+        with pytest.raises(NotADirectoryError, match=f"TaskEvalCallback {name} .*taken' is a file"):
+            model.learn(64, callback=callback)
+    assert (tmp_path / "taken").read_text() == "a user's file"
+
+
 def test_callbacks_warn_when_the_shaping_discounts_otherwise_than_the_agent():
     shaped = {"mode": "potential", "gamma": 0.99}
     model = PPO(
