@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import pickle
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -924,9 +925,22 @@ class SwirlDQN(DQN):
     def load_replay_buffer(self, path: Any, truncate_last_traj: bool = True) -> None:
         """SB3's ``load_replay_buffer``; a buffer that does not fit this model (another number
         of envs, other spaces: another env's or task's) is refused, naming the file, and the
-        model keeps its own (SB3 takes it, and ``learn`` fails deep inside the buffer)."""
-        own = self.replay_buffer
-        super().load_replay_buffer(path, truncate_last_traj)
+        model keeps its own (SB3 takes it, and ``learn`` fails deep inside the buffer), as is
+        a file that holds no replay buffer."""
+        own, name = (
+            self.replay_buffer,
+            os.fspath(path) if isinstance(path, str | os.PathLike) else path,
+        )
+        try:
+            super().load_replay_buffer(path, truncate_last_traj)
+        except (pickle.UnpicklingError, EOFError) as exc:  # SB3: "invalid load key, '{'"
+            self.replay_buffer = own
+            raise ValueError(
+                f"{name}: not a replay buffer written by save_replay_buffer, or cut short ({exc})"
+            ) from exc
+        except AssertionError as exc:  # SB3's check that it holds a ReplayBuffer
+            self.replay_buffer = own
+            raise ValueError(f"{name}: {exc}; it holds no replay buffer") from exc
         buffer = self.replay_buffer
         wrong = [
             f"{what} {theirs} (this model: {ours})"
@@ -940,8 +954,7 @@ class SwirlDQN(DQN):
         if wrong:
             self.replay_buffer = own
             raise ValueError(
-                f"{os.fspath(path) if isinstance(path, str | os.PathLike) else path}: the replay "
-                f"buffer does not fit this model: {'; '.join(wrong)}"
+                f"{name}: the replay buffer does not fit this model: {'; '.join(wrong)}"
             )
 
     @classmethod

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import pickle
 import warnings
 
 import gymnasium as gym
@@ -296,6 +297,16 @@ def test_save_is_atomic_and_refuses_a_folder_and_load_a_plain_dqn(tmp_path, monk
     own = two.replay_buffer
     with pytest.raises(ValueError, match=r"buffer\.pkl: the replay buffer does not fit.*n_envs 1"):
         two.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert two.replay_buffer is own
+    (tmp_path / "task.pkl").write_text("{}")  # a JSON by mistake: SB3 "invalid load key"
+    (tmp_path / "cut.pkl").write_bytes((tmp_path / "buffer.pkl").read_bytes()[:100])
+    with open(tmp_path / "list.pkl", "wb") as fh:
+        pickle.dump([1, 2], fh)
+    for name, why in [("task", "invalid load key"), ("cut", "data was truncated")]:
+        with pytest.raises(ValueError, match=rf"{name}\.pkl: not a replay buffer .*{why}"):
+            two.load_replay_buffer(tmp_path / f"{name}.pkl")
+    with pytest.raises(ValueError, match=r"list\.pkl: .*it holds no replay buffer"):
+        two.load_replay_buffer(tmp_path / "list.pkl")
     assert two.replay_buffer is own
     with pytest.raises(ValueError, match=r"env= carries no SWIRL task: wrap it with the one"):
         SwirlDQN.load(path, env=PointEnv())  # SB3 said the spaces differ, in array dumps
