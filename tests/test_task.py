@@ -269,6 +269,9 @@ def test_binary_file_is_a_value_error_naming_it(tmp_path):
         (lambda d: d["regions"][1].update(threshold=True), r"regions\[1\]: .*threshold .*True"),
         (lambda d: d["regions"][0].update(time_bounds=[0, False]), "time_bounds"),
         (lambda d: d.update(dims=[True, 1, 2, 3]), "dims must be a sequence of ints"),
+        # Python ints beyond int64 or float: numpy and float() overflowed (OverflowError)
+        (lambda d: d.update(dims=[0, 1, 2, 10**30]), r"dims holds the index 10{30}, beyond"),
+        (lambda d: d["regions"][0].update(threshold=10**400), "threshold must be a finite"),
         (lambda d: d.update(treshold=3), "unknown key.*'treshold'"),
         (lambda d: d["regions"][0].update(radius=3), r"regions\[0\]: .*unknown key.*'radius'"),
         (lambda d: d["reward_config"].update(bonus=1), "reward_config: .*unknown key.*'bonus'"),
@@ -294,6 +297,13 @@ def test_bad_fields_are_clear_value_errors(edit, message):
     edit(data)
     with pytest.raises(ValueError, match=message):
         TaskModel.from_json(json.dumps(data))
+
+
+def test_json_nested_too_deeply_is_a_value_error():
+    """json and the fields' checks recursed until Python's RecursionError."""
+    text = random_task(0).to_json().replace('"features": null', '"features": ' + "[" * 10**4)
+    with pytest.raises(ValueError, match="nests its JSON too deeply to be a task model"):
+        TaskModel.from_json(text)
 
 
 def test_paths_that_look_like_json_are_read_as_files(tmp_path, monkeypatch):

@@ -38,7 +38,7 @@ def check_real(
     ok = (
         isinstance(value, numbers.Real)
         and not isinstance(value, bool | np.bool_)
-        and math.isfinite(value)
+        and (abs(value) < 2**1024 if isinstance(value, int) else math.isfinite(value))
         and (low is None or (value > low if low_open else value >= low))
         and (high is None or (value < high if high_open else value <= high))
     )

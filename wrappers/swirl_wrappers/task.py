@@ -112,6 +112,8 @@ def _as_indices(value: Any, name: str) -> tuple[int, ...]:
             raise ValueError(f"{name} must be a sequence of ints, got {value!r}")
         if item < 0:
             raise ValueError(f"{name} must be non-negative indices, got {value!r}")
+        if item >= 2**31:  # numpy's indexing would overflow
+            raise ValueError(f"{name} holds the index {item}, beyond any observation's size")
         out.append(int(item))
     return tuple(out)
 
@@ -1015,11 +1017,13 @@ class TaskModel:
                     f"cannot read task model file {file}: it is a binary file, not the JSON "
                     "text that TaskModel.to_json and `sb3-swirl fit` write"
                 ) from None
+        what = "task model" if file is None else f"task model file {file}"
         try:
             data = json.loads(text.lstrip("\ufeff"))
         except json.JSONDecodeError as exc:
-            what = "task model" if file is None else f"task model file {file}"
             raise ValueError(f"{what} is not valid JSON (corrupted or truncated?): {exc}") from exc
+        except RecursionError:
+            raise ValueError(f"{what} nests its JSON too deeply to be a task model") from None
         try:
             return cls.from_dict(data)
         except ValueError as exc:
