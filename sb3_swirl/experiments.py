@@ -1568,8 +1568,7 @@ def reproduce(
     if seeds is None:
         seeds = list(experiment.seeds[: experiment.quick_seeds] if quick else experiment.seeds)
     seeds = _checked_seeds(seeds)
-    out = Path(out_dir) / name
-    out.mkdir(parents=True, exist_ok=True)
+    out = Path(out_dir) / name  # made by run_sweep, which removes it if no run starts
     labels, work = _jobs(experiment, panels, methods, seeds, quick)
     stamp = _settings_stamp()
     console.rule(f"[bold]{experiment.title}: {len(work)} run{'s' * (len(work) != 1)}, {backend}")

@@ -221,7 +221,30 @@ def run_sweep(
     path = Path(path)
     if path.exists() and not resume:
         raise ValueError(f"{path} exists: resume the sweep (--resume) or choose another output")
+    made = [folder for folder in (path.parent, *path.parent.parents) if not folder.exists()]
     path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        return _run_sweep(function, jobs, path, backend, n_jobs, address, progress, stamp)
+    except BaseException:  # a backend that fails to start leaves no empty folder behind
+        for folder in made:  # the deepest first; rmdir keeps a folder that holds anything
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
+
+
+def _run_sweep(
+    function: Callable[..., Any],
+    jobs: Sequence[Mapping[str, Any]],
+    path: Path,
+    backend: str,
+    n_jobs: int,
+    address: str | None,
+    progress: bool,
+    stamp: Mapping[str, Any] | None,
+) -> list[Any]:
+    """:func:`run_sweep` once its folder exists."""
     if not os.access(path if path.exists() else path.parent, os.W_OK):  # before any run
         raise ValueError(f"cannot write {path}: no permission to append the runs' records")
     done = _read_done(path)

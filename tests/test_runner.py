@@ -90,12 +90,15 @@ def test_bad_backend_is_a_clear_error(tmp_path):
 
 
 def test_a_backend_that_fails_to_start_leaves_no_runs_file(tmp_path, monkeypatch):
-    """Else the same command, run again, would refuse: the (empty) runs file exists."""
+    """Else the same command, run again, would refuse: the (empty) runs file exists. The
+    folders it made go too (an empty results/fig2 left behind); folders it found stay."""
     monkeypatch.setitem(__import__("sys").modules, "ray", None)  # Ray not installed
-    path = tmp_path / "runs.jsonl"
-    with pytest.raises(ImportError, match=r"needs Ray: pip install 'sb3-swirl\[ray\]'"):
-        run_sweep(noisy, JOBS, path, backend="ray", progress=False)
-    assert not path.exists()
+    (tmp_path / "results").mkdir()
+    for path in (tmp_path / "results/fig2/runs.jsonl", tmp_path / "results/runs.jsonl"):
+        with pytest.raises(ImportError, match=r"needs Ray: pip install 'sb3-swirl\[ray\]'"):
+            run_sweep(noisy, JOBS, path, backend="ray", progress=False)
+        assert not path.exists()
+        assert sorted(p.name for p in tmp_path.rglob("*")) == ["results"]
 
 
 def test_resuming_runs_made_under_other_settings_warns(tmp_path, importable):
