@@ -631,11 +631,20 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt as exc:
             return _interrupted(exc)
     args = build_parser().parse_args(argv)
-    say = _as_flags if args.func is _cmd_fit else str
+    return run_command(lambda: args.func(args), _as_flags if args.func is _cmd_fit else str)
+
+
+def run_command(command: Callable[[], int | None], say: Callable[[str], str] = str) -> int:
+    """Run ``command`` as ``sb3-swirl`` runs each of its commands (the benchmark scripts too).
+
+    Each warning is one line; a bad setting or path (``ValueError``, ``OSError``,
+    ``ImportError``) is one ``error:`` line and exit status 2; Ctrl-C or SIGTERM stops it with
+    one line and 130 or 143. ``say`` words the messages (``sb3-swirl fit``: as its flags).
+    """
     try:
         with warnings.catch_warnings(), _terminate_as_interrupt():
             warnings.showwarning = _warning_printer(say)
-            return args.func(args)
+            return command() or 0
     # OSError: a path that is a folder, unwritable...; ImportError: an optional extra missing
     except (ValueError, OSError, ImportError) as exc:
         # soft_wrap: never break a path a user may copy; escape: paths may contain [brackets]
