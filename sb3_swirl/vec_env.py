@@ -10,7 +10,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import (
     DummyVecEnv,
     VecEnv,
@@ -238,64 +237,81 @@ def get_swirl_attr(env: VecEnv, name: str) -> Any:
 
 @dataclass
 class _SwirlEnvFactory:
-    """Makes ``Monitor(SwirlWrapper(base env, task, ...))``, picklable by reference.
+    """Makes ``SwirlWrapper(base env, task, ...)``, picklable by reference (``make_vec_env``
+    puts the ``Monitor`` outside).
 
     SB3's ``SubprocVecEnv`` sends env factories to fresh processes (``forkserver``, ``spawn``).
     Defined in this module, the factory is unpickled by importing sb3_swirl, which registers
     the ``sb3_swirl/`` env ids there before ``gym.make`` runs.
     """
 
-    env: str | gym.Env | Callable[[], gym.Env]
+    env: str | gym.Env | Callable[..., gym.Env]
     task: TaskModel
     wrapper_kwargs: dict[str, Any] = field(default_factory=dict)
-    make_kwargs: dict[str, Any] = field(default_factory=dict)
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
 
     def __call__(self) -> gym.Env:
         if isinstance(self.env, str):
-            base = gym.make(self.env, **self.make_kwargs)
+            try:  # as SB3's make_vec_env: rgb_array frames where the env can render
+                base = gym.make(self.env, **{"render_mode": "rgb_array", **self.env_kwargs})
+            except TypeError:
+                base = gym.make(self.env, **self.env_kwargs)
         elif isinstance(self.env, gym.Env):
             base = self.env
         else:
-            base = self.env()
-        return Monitor(SwirlWrapper(base, self.task, **self.wrapper_kwargs))
+            base = self.env(**self.env_kwargs)
+        return SwirlWrapper(base, self.task, **self.wrapper_kwargs)
 
 
 def make_swirl_env(
-    env: str | gym.Env | Callable[[], gym.Env],
+    env_id: str | gym.Env | Callable[..., gym.Env],
     task: TaskModel,
     n_envs: int = 1,
     seed: int | None = None,
+    start_index: int = 0,
+    monitor_dir: str | None = None,
+    env_kwargs: dict[str, Any] | None = None,
     wrapper_kwargs: dict[str, Any] | None = None,
     vec_env_cls: type[VecEnv] | None = None,
     vec_env_kwargs: dict[str, Any] | None = None,
-    **make_kwargs: Any,
+    monitor_kwargs: dict[str, Any] | None = None,
 ) -> VecEnv:
-    """A vectorised env whose sub-envs are ``Monitor(SwirlWrapper(env, task, **wrapper_kwargs))``.
+    """SB3's ``make_vec_env`` with every sub-env ``Monitor(SwirlWrapper(env, task))``.
 
     The monitor sits outside the SWIRL wrapper, so it sees the episode as the agent does
     (including an early end with ``terminate_on_completion``); the env's own reward stays in
     ``info["task_reward"]``. The sub-envs can run in other processes (``SubprocVecEnv``, any
-    start method): they find the ``sb3_swirl/`` env ids there.
+    start method): they find the ``sb3_swirl/`` env ids there. The arguments are
+    ``make_vec_env``'s but ``wrapper_kwargs``, which go to :class:`SwirlWrapper` (give a factory
+    for wrappers of your own).
 
     Parameters
     ----------
-    env : str, gymnasium.Env or callable
-        A registered id (made with ``gym.make(env, **make_kwargs)``), an env instance
-        (``n_envs`` must then be 1) or a picklable factory.
+    env_id : str, gymnasium.Env or callable
+        A registered id (made with ``gym.make(env_id, render_mode="rgb_array", **env_kwargs)``,
+        without the render mode where the env takes none, as SB3 does), an env instance
+        (``n_envs`` must then be 1) or a picklable factory (called with ``**env_kwargs``).
     task : TaskModel
         The proxy task.
     n_envs : int
         Number of sub-environments.
     seed : int, optional
         Seed of the first sub-env; the others get ``seed + i``.
+    start_index : int
+        Rank of the first sub-env (its seed offset and monitor file name).
+    monitor_dir : str, optional
+        Folder of the monitors' ``{rank}.monitor.csv`` files; default: none written.
+    env_kwargs : dict, optional
+        Passed to ``gym.make`` or to the factory (e.g. ``{"radius": 2.0}``); refused with an env
+        instance.
     wrapper_kwargs : dict, optional
         ``reward_config``, ``terminate_on_completion`` or ``state_key`` of ``SwirlWrapper``.
     vec_env_cls : type, optional
         ``DummyVecEnv`` (default) or ``SubprocVecEnv``.
     vec_env_kwargs : dict, optional
         Passed to ``vec_env_cls`` (e.g. ``{"start_method": "spawn"}``).
-    **make_kwargs
-        Passed to ``gym.make`` when ``env`` is an id (e.g. ``radius=2.0``); refused otherwise.
+    monitor_kwargs : dict, optional
+        Passed to each ``Monitor`` (e.g. ``{"info_keywords": ("is_success",)}``).
 
     Returns
     -------
@@ -315,24 +331,27 @@ def make_swirl_env(
     ((2, 6), [1, 1])
     """
     n_envs = check_int("n_envs", n_envs, low=1)
-    if isinstance(env, gym.Env) and n_envs != 1:
+    if isinstance(env_id, gym.Env) and n_envs != 1:
         raise ValueError(
             f"an env instance can back only one sub-env, got n_envs={n_envs}; "
             "pass an env id or a factory instead"
         )
-    if make_kwargs and not isinstance(env, str):
+    if env_kwargs and isinstance(env_id, gym.Env):
         raise TypeError(
-            f"make_swirl_env passes {sorted(make_kwargs)} to gym.make, which only runs for an "
-            f"env id; got {type(env).__name__}: give the settings to your env or factory instead"
+            f"env_kwargs {sorted(env_kwargs)} are for gym.make or a factory; got an env "
+            f"instance ({type(env_id).__name__}): give the settings to your env instead"
         )
-    factory = _SwirlEnvFactory(env, task, dict(wrapper_kwargs or {}), make_kwargs)
+    factory = _SwirlEnvFactory(env_id, task, dict(wrapper_kwargs or {}), dict(env_kwargs or {}))
     vec_env_cls = vec_env_cls or DummyVecEnv
-    if vec_env_cls is not DummyVecEnv and not isinstance(env, gym.Env):
+    if vec_env_cls is not DummyVecEnv and not isinstance(env_id, gym.Env):
         factory().close()  # a bad id, task or setting fails here, not in a worker process
     return make_vec_env(
         factory,
         n_envs=n_envs,
         seed=seed,
+        start_index=start_index,
+        monitor_dir=monitor_dir,
         vec_env_cls=vec_env_cls,
         vec_env_kwargs=vec_env_kwargs,
+        monitor_kwargs=monitor_kwargs,
     )

@@ -846,19 +846,39 @@ def test_demos_far_outside_the_observation_bounds_are_warned_about():
         SwirlWrapper(gym.make("MountainCar-v0"), TaskModel.from_json(in_cm.to_json()))
 
 
-def test_make_swirl_env_passes_env_settings_to_gym_make_only():
+def test_make_swirl_env_takes_make_vec_envs_arguments(tmp_path):
+    """As SB3's make_vec_env: env_kwargs, render_mode="rgb_array", one Monitor (it was two)
+    writing to monitor_dir with monitor_kwargs, start_index."""
+    from stable_baselines3.common.monitor import Monitor
+
     from sb3_swirl import make_swirl_env
 
     task = TaskModel(
         [Region([0.0, 0.0], np.eye(2), 4.0)], [QuadraticReward([0.0, 0.0], np.eye(2))], dims=(0, 1)
     )
-    venv = make_swirl_env("sb3_swirl/ParallelParking-v0", task, max_speed=0.5)
-    assert venv.get_attr("unwrapped")[0].max_speed == 0.5
+    venv = make_swirl_env(
+        "sb3_swirl/ParallelParking-v0",
+        task,
+        n_envs=2,
+        start_index=3,
+        monitor_dir=str(tmp_path),
+        env_kwargs={"max_speed": 0.5},
+        monitor_kwargs={"info_keywords": ("is_success",)},
+    )
+    env = venv.envs[0]
+    assert isinstance(env, Monitor) and isinstance(env.env, SwirlWrapper)
+    assert env.unwrapped.max_speed == 0.5 and env.render_mode == "rgb_array"
+    venv.reset()
+    assert venv.render().ndim == 3  # make_vec_env's default: frames
+    for _ in range(200):  # past the time limit: each monitor logs an episode
+        venv.step(np.zeros(2, dtype=int))
     venv.close()
-    with pytest.raises(TypeError, match=r"\['radius'\] to gym.make.*got function"):
-        make_swirl_env(lambda: PointEnv(), line_task(), radius=2.0)  # was ignored silently
-    with pytest.raises(TypeError, match="got PointEnv"):
-        make_swirl_env(PointEnv(), line_task(), radius=2.0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["3.monitor.csv", "4.monitor.csv"]
+    assert "is_success" in (tmp_path / "3.monitor.csv").read_text().splitlines()[1]
+    factory = make_swirl_env(lambda radius: PointEnv(), line_task(), env_kwargs={"radius": 2.0})
+    assert isinstance(factory.envs[0].unwrapped, PointEnv)  # the factory took the setting
+    with pytest.raises(TypeError, match=r"env_kwargs \['radius'\] .*got an env instance"):
+        make_swirl_env(PointEnv(), line_task(), env_kwargs={"radius": 2.0})
 
 
 # ----------------------------------------------------------------------- subprocess workers
