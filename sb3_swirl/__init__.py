@@ -51,7 +51,7 @@ from sb3_swirl.segmentation import (
     switch_scores,
 )
 from sb3_swirl.supervisors import collect_demos
-from sb3_swirl.vec_env import SwirlVecEnv, get_swirl_attr, make_swirl_env
+from sb3_swirl.vec_env import SwirlVecEnv, get_swirl_attr, make_swirl_env, trained_task
 from swirl_wrappers import RewardConfig, SwirlVectorWrapper, SwirlWrapper, TaskModel
 
 __all__ = [
@@ -102,5 +102,6 @@ __all__ = [
     "switch_scores",
     "to_imitation",
     "to_minari",
+    "trained_task",
 ]
 __version__ = "0.1.0"

@@ -26,7 +26,7 @@ from stable_baselines3.common.vec_env import (
     unwrap_vec_normalize,
 )
 
-from sb3_swirl.vec_env import get_swirl_attr, same_task, swirl_task
+from sb3_swirl.vec_env import get_swirl_attr, same_task, swirl_task, trained_task
 from swirl_wrappers._io import atomic_write
 from swirl_wrappers._validation import check_int
 
@@ -180,7 +180,9 @@ class TaskEvalCallback(EvalCallback):
     ``eval/mean_ep_length``. ``eval/mean_reward`` is the return ``evaluate_policy`` reads: the
     proxy return with ``Monitor`` outside the SWIRL wrapper (``make_swirl_env``), the env's
     own with a ``Monitor`` inside it (the zoo). The best model (highest success rate, ties broken by
-    true return) goes to ``best_model_save_path/best_model.zip``, and ``best_mean_reward`` is its
+    true return) goes to ``best_model_save_path/best_model.zip``, with the task (and the reward
+    settings it paid by) as ``task.json`` beside it for an algorithm whose model file does not hold
+    it (any but ``SwirlDQN``), and ``best_mean_reward`` is its
     true return: SB3's ``StopTrainingOnRewardThreshold`` compares the threshold with it, and
     ``StopTrainingOnNoModelImprovement`` counts an evaluation as an improvement when it rises
     (not when only the success rate does). Episodes are counted as ``evaluate_policy`` counts
@@ -380,6 +382,10 @@ class TaskEvalCallback(EvalCallback):
                 )
             if self.best_model_save_path is not None:
                 self.model.save(os.path.join(self.best_model_save_path, "best_model"))
+                if getattr(self.model, "task_json", None) is None:  # PPO, SAC...: not inside
+                    trained_task(self.training_env).to_json(
+                        os.path.join(self.best_model_save_path, "task.json")
+                    )
             self.best_score = score
             self.best_mean_reward = task_return
             if self.callback_on_new_best is not None:

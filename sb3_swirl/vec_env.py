@@ -202,6 +202,14 @@ def swirl_task(env: Any) -> TaskModel | None:
     return task if isinstance(task, TaskModel) else None
 
 
+def trained_task(env: VecEnv) -> TaskModel:
+    """The SWIRL env's task with the reward settings it pays by: what to save beside a model
+    that does not hold it (any algorithm but ``SwirlDQN``), to wrap an env with it again."""
+    return dataclasses.replace(
+        get_swirl_attr(env, "task"), reward_config=get_swirl_attr(env, "reward_config")
+    )
+
+
 def get_swirl_attr(env: VecEnv, name: str) -> Any:
     """``env.get_attr(name)`` of a SWIRL env's first sub-env: ``"task"``, ``"reward_config"`` or
     ``"terminate_on_completion"``.

@@ -56,7 +56,7 @@ from sb3_swirl.demos import (
     joined_state_note,
     load_demos,
 )
-from sb3_swirl.vec_env import get_swirl_attr, swirl_task
+from sb3_swirl.vec_env import swirl_task, trained_task
 from swirl_wrappers import RewardConfig, SwirlWrapper, TaskModel
 from swirl_wrappers.wrappers import StateKey, state_space
 
@@ -701,10 +701,8 @@ def _task_saved_with_each_run() -> Iterator[None]:
 
     def learn_with_the_task_saved(manager: Any, model: Any, *args: Any, **kwargs: Any) -> None:
         env, folder = model.get_env(), getattr(manager, "params_path", None)
-        task = swirl_task(env)
-        if task is not None and folder is not None:
-            paid = get_swirl_attr(env, "reward_config")
-            dataclasses.replace(task, reward_config=paid).to_json(Path(folder) / "task.json")
+        if swirl_task(env) is not None and folder is not None:
+            trained_task(env).to_json(Path(folder) / "task.json")
         learn(manager, model, *args, **kwargs)
 
     ExperimentManager.learn = learn_with_the_task_saved

@@ -18,8 +18,8 @@ from test_dqn import PointEnv, point_demos, point_env, point_task
 
 from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
 from sb3_swirl.dqn import SwirlDQN
-from sb3_swirl.vec_env import make_swirl_env
-from swirl_wrappers import Region, SwirlWrapper
+from sb3_swirl.vec_env import make_swirl_env, same_task
+from swirl_wrappers import Region, SwirlWrapper, TaskModel
 
 
 def logged(path) -> dict[str, list[str]]:
@@ -77,7 +77,9 @@ def test_task_eval_scores_true_success_and_saves_best(tmp_path):
     assert callback.success_rates[0] == 1.0
     assert callback.task_returns[0] == 1.0
     assert all(r < 0 for r in callback.evaluations_results[0])
-    assert (tmp_path / "best" / "best_model.zip").is_file()
+    assert sorted(p.name for p in (tmp_path / "best").iterdir()) == [
+        "best_model.zip"
+    ]  # task inside
     saved = np.load(tmp_path / "eval" / "evaluations.npz")
     np.testing.assert_array_equal(saved["episodes"], callback.evaluations_episodes)
     np.testing.assert_array_equal(saved["success_rate"], callback.success_rates)
@@ -109,7 +111,8 @@ def test_eval_at_start_scores_the_bc_start_before_any_env_step():
 
 
 def test_callbacks_work_with_ppo_on_a_swirl_env(tmp_path):
-    model = PPO("MlpPolicy", point_env(), n_steps=64, batch_size=32, n_epochs=1, seed=0)
+    shaped = {"mode": "potential", "gamma": 0.99}
+    model = PPO("MlpPolicy", point_env(reward_config=shaped), n_steps=64, batch_size=32, seed=0)
     model.set_logger(configure(str(tmp_path), ["csv"]))
     evaluation = TaskEvalCallback(
         point_env(), n_eval_episodes=2, eval_freq=64, best_model_save_path=str(tmp_path), verbose=0
@@ -117,6 +120,11 @@ def test_callbacks_work_with_ppo_on_a_swirl_env(tmp_path):
     model.learn(128, callback=[SegmentProgressCallback(), evaluation])
     assert len(evaluation.success_rates) == 2
     assert (tmp_path / "best_model.zip").is_file()
+    # PPO's zip holds no task: it is saved beside, with the reward settings trained on
+    saved = TaskModel.from_json(tmp_path / "task.json")
+    assert same_task(saved, point_task()) and saved.reward_config.mode == "potential"
+    loaded = PPO.load(tmp_path / "best_model.zip", env=point_env(reward_config=saved.reward_config))
+    assert loaded.get_env().get_attr("reward_config")[0] == saved.reward_config
     log = logged(tmp_path)
     assert log["eval/success_rate"] and log["swirl/final_segment_mean"]
 
