@@ -776,6 +776,18 @@ class SwirlDQN(DQN):
         if self.verbose >= 1 and self.bc_epochs:
             print(f"SwirlDQN: BC accuracy {info['accuracy']:.3f} on the demo pairs", flush=True)
         if self.prefill_replay:
+            unrewarded = [i for i, d in enumerate(self.demonstrations or []) if d.rewards is None]
+            weight = self.reward_config.task_reward_weight
+            if unrewarded and weight != 0:  # TD learning reads the env's reward they lack
+                warnings.warn(
+                    f"demos {unrewarded} hold no rewards: in the replay buffer (prefill_replay) "
+                    "their steps pay the env's reward as 0, and 1 on the last step (taken to "
+                    f"succeed), which task_reward_weight={weight:g} adds to the proxy reward. "
+                    "Record the env's rewards, Demonstration(observations, actions, rewards) "
+                    "(collect_demos does), or set task_reward_weight to 0",
+                    DemoWarning,
+                    stacklevel=3,
+                )
             self._prefill(data)
         if self.pretrain_td_steps:
             if self.verbose >= 1:

@@ -14,7 +14,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNormalize
 
 import sb3_swirl.envs  # noqa: F401  (registers the envs)
-from sb3_swirl.demos import Demonstration
+from sb3_swirl.demos import Demonstration, DemoWarning
 from sb3_swirl.dqn import SwirlDQN
 from sb3_swirl.experiments import PRESETS
 from sb3_swirl.features import RBFFeaturesExtractor
@@ -406,6 +406,25 @@ def test_prefill_matches_what_the_wrapper_shows(wrapper_kwargs):
     assert buffer.size() == row
 
 
+def test_prefill_warns_of_demos_without_rewards_where_the_env_reward_counts():
+    """TD learning on such demos reads an env reward of 0 a step and 1 at the end: not the
+    env's own (MountainCar pays -1 a step)."""
+    counted = {"mode": "potential", "task_reward_weight": 1.0}
+    kwargs = dict(prefill_replay=True, bc_epochs=1, seed=0)
+    kwargs["demonstrations"] = point_demos(2)
+    model = SwirlDQN("MlpPolicy", point_env(reward_config=counted), **kwargs)
+    with pytest.warns(DemoWarning, match=r"demos \[0, 1\] hold no rewards: .*weight=1 adds"):
+        model.pretrain()
+    rewarded = [Demonstration(d.observations, d.actions, np.zeros(len(d))) for d in point_demos(2)]
+    ignored = {"mode": "quadratic", "task_reward_weight": 0.0}
+    for demos, config in [(rewarded, counted), (point_demos(2), ignored)]:
+        kwargs["demonstrations"] = demos
+        model = SwirlDQN("MlpPolicy", point_env(reward_config=config), **kwargs)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", DemoWarning)
+            model.pretrain()
+
+
 @pytest.mark.parametrize("handle_timeout_termination", [True, False])
 def test_prefill_lays_demos_out_in_order_for_n_step_returns(handle_timeout_termination):
     """With 3 envs and 3-step returns, each buffer column reads the demos in order, and a
@@ -765,7 +784,6 @@ def test_a_plain_subprocess_env_is_a_clear_error_not_a_dead_worker():
 
 def test_demos_far_outside_the_observation_bounds_are_warned_about():
     """Demos in cm for an env in m: the clone would learn at states the agent never sees."""
-    from sb3_swirl.demos import DemoWarning
 
     demos = point_demos(2)
     in_cm = [Demonstration(d.observations * 100, d.actions) for d in demos]

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -134,7 +138,44 @@ def test_supervisor_succeeds_with_small_errors(radius):
         assert sup.phase == FOLLOW
         assert info["position_error_cm"] < 0.5
         assert info["tracking_error_cm"] < 0.3
+    with pytest.warns(UserWarning, match="step\\(\\) called after the episode terminated"):
+        assert env.step(FOLLOW)[1:3] == (0.0, True)  # it paid 1.0 again, and every step after
+    assert env.step(FOLLOW)[1] == 0.0
     env.close()
+
+
+def test_render_says_what_offscreen_opengl_needs(monkeypatch):
+    """Without a working backend, mujoco failed deep inside (gladLoadGL, no GLContext...)."""
+    import mujoco
+
+    def no_gl(*args, **kwargs):
+        raise AttributeError("module 'mujoco.gl_context' has no attribute 'GLContext'")
+
+    monkeypatch.setattr(mujoco, "Renderer", no_gl)
+    env = DVRKLineCuttingEnv(render_mode="rgb_array")
+    env.reset(seed=0)
+    with pytest.raises(RuntimeError, match=r"needs offscreen OpenGL, and MuJoCo's backend .*EGL"):
+        env.render()
+    env.close()
+
+
+def test_importing_sets_no_gl_backend_on_a_machine_without_egl():
+    """MUJOCO_GL=egl without libEGL broke every MuJoCo env, rendering or not."""
+    code = (
+        "import ctypes, os\n"
+        "real = ctypes.CDLL\n"
+        "def cdll(name, *a, **k):\n"
+        "    if 'EGL' in str(name):\n"
+        "        raise OSError(name)\n"
+        "    return real(name, *a, **k)\n"
+        "ctypes.CDLL = cdll\n"
+        "import sb3_swirl\n"
+        "print(os.environ.get('MUJOCO_GL'))\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split()[-1] == "None"
 
 
 def test_supervisor_lines_up_across_the_line_before_moving_in(env):

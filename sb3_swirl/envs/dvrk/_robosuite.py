@@ -16,6 +16,7 @@ reported as ``terminated``), and robosuite's default end-effector controller doe
 from __future__ import annotations
 
 import atexit
+import ctypes
 import os
 import sys
 import weakref
@@ -25,11 +26,24 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
+
+def _egl_loads() -> bool:
+    """Whether this machine has EGL (libEGL), which MUJOCO_GL=egl needs even to import mujoco."""
+    try:
+        ctypes.CDLL("libEGL.so.1")
+    except OSError:
+        return False
+    return True
+
+
 # mujoco picks its OpenGL backend once, when it is imported (robosuite imports it): on a
 # headless Linux machine only EGL can render offscreen, and it works with a display too. A
-# backend the user chose (MUJOCO_GL set before this) is kept.
-if sys.platform.startswith("linux"):
-    os.environ.setdefault("MUJOCO_GL", "egl")
+# backend the user chose (MUJOCO_GL set before this) is kept, and without libEGL none is set:
+# mujoco with MUJOCO_GL=egl fails on import there, for every MuJoCo env, rendering or not.
+if sys.platform.startswith("linux") and "MUJOCO_GL" not in os.environ and _egl_loads():
+    os.environ["MUJOCO_GL"] = "egl"
+#: the backend mujoco starts with (robosuite's import sets MUJOCO_GL to egl after it)
+_MUJOCO_GL = os.environ.get("MUJOCO_GL", "unset: glfw")
 
 
 def _close_renderer(ref: weakref.ref) -> None:
@@ -175,6 +189,7 @@ class RobosuiteStepEnv(gym.Env):
         self.workspace_low = np.asarray(workspace_low, dtype=np.float64)
         self.workspace_high = np.asarray(workspace_high, dtype=np.float64)
         self._renderer = None
+        self._ended: int = 0  # 1: the episode terminated, 2: and a step came after
         self._task = self._make_task()
         self._arm = self._task.robots[0]
         self._controller: Any = None
@@ -288,6 +303,7 @@ class RobosuiteStepEnv(gym.Env):
         start = self._after_reset()
         for _ in range(self.settle_steps):
             self._command(start)
+        self._ended = 0
         return self._observe(), {}
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -296,6 +312,15 @@ class RobosuiteStepEnv(gym.Env):
         self._apply(int(action))
         obs = self._observe()
         reward, terminated, info = self._evaluate()
+        if self._ended:  # as gymnasium's CartPole: say so once, and pay nothing more
+            if self._ended == 1:
+                gym.logger.warn(
+                    "step() called after the episode terminated: call reset(); these steps "
+                    "pay 0 reward"
+                )
+            self._ended, reward = 2, 0.0
+        elif terminated:
+            self._ended = 1
         return obs, reward, terminated, False, info
 
     def _apply(self, action: int) -> None:
@@ -319,7 +344,15 @@ class RobosuiteStepEnv(gym.Env):
 
         if self._renderer is None:
             height, width = self.render_size
-            self._renderer = mujoco.Renderer(self.sim.model._model, height, width)
+            try:
+                self._renderer = mujoco.Renderer(self.sim.model._model, height, width)
+            except Exception as exc:  # gladLoadGL, EGL_NOT_INITIALIZED, no GLContext...
+                raise RuntimeError(
+                    f"render_mode='rgb_array' needs offscreen OpenGL, and MuJoCo's backend "
+                    f"(MUJOCO_GL {_MUJOCO_GL}) could not start here: {type(exc).__name__}: {exc}. "
+                    "On a headless Linux machine install EGL (libegl1) and set MUJOCO_GL=egl "
+                    "before importing mujoco; training never needs rendering"
+                ) from exc
             # closed with the env, or at exit before mujoco ends EGL (its own atexit hook,
             # registered earlier, runs later)
             atexit.register(_close_renderer, weakref.ref(self._renderer))
