@@ -225,6 +225,10 @@ def test_supervisor_slips_across_the_line_and_steps_back():
     assert info["is_success"] and np.abs(offsets).max() < 0.3 and set(actions) == {PLUS_X}
     with pytest.raises(ValueError, match="slip"):
         LineCuttingSupervisor(env.unwrapped, slip=1.5)
+    # metres: 4.0 (cm, as the env's radius) or a negative lookahead failed every cut silently
+    for kwargs in [{"lookahead": 4.0}, {"lookahead": -0.004}, {"approach": "x"}]:
+        with pytest.raises(ValueError, match=rf"{next(iter(kwargs))} \(m\) must be a finite"):
+            LineCuttingSupervisor(env.unwrapped, **kwargs)
     env.close()
 
 

@@ -171,9 +171,15 @@ def test_bad_constructor_values(kwargs, match):
         DVRKTensioningEnv(**kwargs)
 
 
-def test_supervisor_needs_the_tensioning_env():
+def test_supervisor_needs_the_tensioning_env_and_checks_its_settings():
     with pytest.raises(ValueError, match="DVRKTensioningEnv"):
         TensioningSupervisor(gym.make("CartPole-v1"))
+    env = gym.make(ENV_ID)
+    bad = [("aim_spread", 1.0), ("target_disparity", 0.0), ("grasp_steps", 0), ("max_wait", 1.5)]
+    for name, value in bad:
+        with pytest.raises(ValueError, match=f"{name}.* must be"):
+            TensioningSupervisor(env, **{name: value})
+    env.close()
 
 
 def test_segmented_bc_runs_in_the_wrapper_and_grasps(demos):

@@ -74,10 +74,11 @@ class LineCuttingSupervisor:
         max_slip: int = 3,
     ) -> None:
         self.env = controlled_env(env, DVRKLineCuttingEnv, "LineCuttingSupervisor")
-        self.lookahead = lookahead
-        self.approach = approach
+        # in metres, as the env's positions (its radius and line settings are in cm)
+        self.lookahead = check_real("lookahead (m)", lookahead, low=0.0, high=0.05, low_open=True)
+        self.approach = check_real("approach (m)", approach, low=0.0, high=0.05, low_open=True)
         self.slip = check_real("slip", slip, low=0.0, high=1.0)
-        self.slack = check_real("slack", slack, low=0.0)
+        self.slack = check_real("slack (m)", slack, low=0.0, high=0.01)
         self.max_slip = check_int("max_slip", max_slip, low=1)
         self._rng = np.random.default_rng(seed)
         self._stage = 0

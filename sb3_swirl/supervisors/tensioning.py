@@ -17,6 +17,7 @@ from sb3_swirl.envs.dvrk.tensioning import (
     DVRKTensioningEnv,
 )
 from sb3_swirl.supervisors._shared import controlled_env, step_towards
+from swirl_wrappers._validation import check_int, check_real
 
 #: The supervisor's phases.
 REACH, GRASP, LIFT, TENSION = range(4)
@@ -48,7 +49,9 @@ class TensioningSupervisor:
     target_disparity : float, default 0.02
         Disparity (cm²) at which pulling stops.
     grasp_steps : int, default 2
+        Steps the gripper is closed for before lifting (at least 1).
     max_wait : int, default 5
+        The most "down" steps pressed while the tool settles to its lowest height.
 
     Examples
     --------
@@ -76,10 +79,12 @@ class TensioningSupervisor:
         max_wait: int = 5,
     ) -> None:
         self.env = controlled_env(env, DVRKTensioningEnv, "TensioningSupervisor")
-        self.aim_spread = aim_spread
-        self.target_disparity = target_disparity
-        self.grasp_steps = grasp_steps
-        self.max_wait = max_wait
+        self.aim_spread = check_real("aim_spread (m)", aim_spread, low=0.0, high=0.05)
+        self.target_disparity = check_real(
+            "target_disparity", target_disparity, low=0.0, low_open=True
+        )
+        self.grasp_steps = check_int("grasp_steps", grasp_steps, low=1)
+        self.max_wait = check_int("max_wait", max_wait, low=0)
         self.rng = np.random.default_rng(seed)
         self._phase = REACH
         self._aim_y = 0.0
