@@ -141,6 +141,8 @@ def test_supervisor_succeeds_with_small_errors(radius):
     with pytest.warns(UserWarning, match="step\\(\\) called after the episode terminated"):
         assert env.step(FOLLOW)[1:3] == (0.0, True)  # it paid 1.0 again, and every step after
     assert env.step(FOLLOW)[1] == 0.0
+    with pytest.raises(ValueError, match=r"reset takes no options, got \{'radius': 3.0\}"):
+        env.reset(options={"radius": 3.0})
     env.close()
 
 

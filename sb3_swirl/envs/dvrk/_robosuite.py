@@ -296,6 +296,11 @@ class RobosuiteStepEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        if options:  # else a setting meant for the line or the sheet is ignored silently
+            raise ValueError(
+                f"{type(self).__name__}.reset takes no options, got {options!r}: give settings "
+                "to the constructor, gym.make(env_id, radius=3.0) for example"
+            )
         super().reset(seed=seed)
         self._task.rng = np.random.default_rng(int(self.np_random.integers(2**63)))
         self._task.reset()

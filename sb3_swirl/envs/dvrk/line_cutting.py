@@ -146,7 +146,8 @@ class DVRKLineCuttingEnv(RobosuiteStepEnv):
     **Episode.** The tool starts at a random place 2–4 cm before the line's start and up to
     2 cm to either side. The cut begins at the first step the tool is within ``on_line``
     (3 mm) of the line; the *position error* is then its distance to the line's start. The
-    episode ends when the point of the line nearest the tool reaches the line's end. The cut
+    episode ends when the point of the line nearest the tool comes within a step (2 mm) of the
+    line's end. The cut
     succeeds if the position error is at most ``tolerance`` (1 cm) and the tool was never more
     than ``tolerance`` from the line. A cut that fails goes on to the end, as the paper's did
     (its tracking errors reach 2.4 cm), so the tracking error covers the whole cut. Reward 1.0
