@@ -29,15 +29,18 @@ def _mountaincar_demos(path: Path, n: int = 10) -> None:
     demos = []
     for seed in range(n):
         obs, _ = env.reset(seed=seed)
-        states, actions, done, terminated = [obs], [], False, False
+        states, actions, rewards, done, terminated = [obs], [], [], False, False
         while not done:
             action = 2 if obs[1] >= 0 else 0
-            obs, _, terminated, truncated, _ = env.step(action)
+            obs, reward, terminated, truncated, _ = env.step(action)
             states.append(obs)
             actions.append(action)
+            rewards.append(reward)
             done = terminated or truncated
         assert terminated
-        demos.append(sb3_swirl.Demonstration(np.array(states), np.array(actions)))
+        demos.append(
+            sb3_swirl.Demonstration(np.array(states), np.array(actions), np.array(rewards))
+        )
     sb3_swirl.save_demos(demos, path)
 
 
