@@ -390,9 +390,20 @@ class SwirlDQN(DQN):
             task, TaskModel.from_json(self.task_json)
         )
 
-    def _check_settings(self, saved: RewardConfig, stacklevel: int) -> None:
-        """Warn when the env's reward settings (now the model's) differ from ``saved``, the
-        ones the model was trained with, and when its shaping discounts otherwise."""
+    def _check_settings(self, saved: RewardConfig, ended: bool, stacklevel: int) -> None:
+        """Warn when the env's reward settings or ``terminate_on_completion`` (now the model's)
+        differ from ``saved`` and ``ended``, those the model was trained with, and when its
+        shaping discounts otherwise."""
+        if ended != self.terminate_on_completion:
+            warnings.warn(
+                f"the environment's SWIRL wrapper has terminate_on_completion="
+                f"{self.terminate_on_completion}, but this model was trained with {ended}: its "
+                "episodes now "
+                + ("end on reaching" if self.terminate_on_completion else "go on past")
+                + " the last region, and the demonstrations are replayed so; wrap the env as "
+                "the training env was to go on alike",
+                stacklevel=stacklevel,
+            )
         if saved != self.reward_config:
             already = (
                 "the Q-values and the demo transitions replayed so far were learnt with the old"
@@ -510,10 +521,10 @@ class SwirlDQN(DQN):
                 "with; load without env=, then wrap the env with model.task"
             )
         if self.env is not None:  # built, or loaded with an env: the env's settings count
-            trained_with = self.reward_config
+            trained_with, ended = self.reward_config, self.terminate_on_completion
             self._take_task(None)
             # called from __init__ or load, which the user called
-            self._check_settings(trained_with, stacklevel=4)
+            self._check_settings(trained_with, ended, stacklevel=4)
         extractor = self.policy_kwargs.get("features_extractor_class")
         if isinstance(extractor, type) and issubclass(extractor, RBFFeaturesExtractor):
             fe_kwargs = dict(self.policy_kwargs.get("features_extractor_kwargs") or {})
@@ -555,9 +566,9 @@ class SwirlDQN(DQN):
                 "with (model.task); wrap the env with model.task, or start a new model"
             )
         super().set_env(env, force_reset)
-        trained_with = self.reward_config
+        trained_with, ended = self.reward_config, self.terminate_on_completion
         self._take_task(None)  # and its reward settings, which replay the demos
-        self._check_settings(trained_with, stacklevel=3)
+        self._check_settings(trained_with, ended, stacklevel=3)
 
     # ------------------------------------------------------------------ hooks
     def _setup_learn(self, *args: Any, **kwargs: Any) -> tuple[int, Any]:

@@ -187,6 +187,10 @@ def test_set_env_and_load_take_the_envs_reward_settings_with_a_warning(tmp_path)
         loaded = SwirlDQN.load(tmp_path / "model.zip", env=point_env(terminate_on_completion=True))
     assert not loaded.reward_config.potential  # the env's, as set_env takes them
     assert loaded.terminate_on_completion and caught[0].filename == __file__
+    ended = "terminate_on_completion=True, but this model was trained with False: its episodes"
+    assert any(ended in str(w.message) for w in caught)  # it was taken without a word
+    with pytest.warns(UserWarning, match="trained with True: its episodes now go on past"):
+        loaded.set_env(point_env(reward_config=potential))
     with pytest.warns(UserWarning, match="trained with RewardConfig") as caught:
         model.set_env(point_env())
     assert not model.reward_config.potential and caught[0].filename == __file__
