@@ -18,6 +18,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
@@ -127,6 +128,11 @@ def _to_demonstration(item: Any, i: int, state_key: tuple[str, ...] | None = Non
     if isinstance(item, Demonstration):
         obs, acts, rews, key = item.observations, item.actions, item.rewards, item.state_key
     else:
+        if isinstance(item, Mapping) and {"obs", "next_obs", "dones"} <= set(item):
+            raise ValueError(  # one of imitation's Transitions: one step, not a trajectory
+                f"demo {i} is a single transition (imitation's Transitions, flattened): pass "
+                "the trajectories, before flatten_trajectories"
+            )
         has_obs, obs = _field(item, ("obs", "observations"))
         if has_obs:
             acts = _field(item, ("acts", "actions"))[1]
@@ -150,12 +156,24 @@ def _to_demonstration(item: Any, i: int, state_key: tuple[str, ...] | None = Non
                         "observations, actions)"
                     ) from None
 
+    if type(obs).__name__ == "DictObs" and hasattr(obs, "items"):  # imitation's Dict obs
+        obs = dict(obs.items())
     if key is not None:
         key = _key_tuple(key, f"demo {i}: state_key")
+        if state_key is not None and key != state_key:  # else fits read other dims silently
+            raise ValueError(
+                f"demo {i} joins the keys {list(key)}, in that order, but state_key is "
+                f"{list(state_key)} (in SwirlDQN and the zoo, the env's): record the demos "
+                "with the same state_key"
+            )
     join = key if state_key is None else state_key
     steps = isinstance(obs, list | tuple) and bool(obs) and isinstance(obs[0], Mapping)
     if join is not None and steps:  # one dict a step, as env.step returns them
-        obs = {k: [step[k] if k in step else None for step in obs] for k in obs[0]}
+        for t, step in enumerate(obs):
+            missing = [k for k in join if k not in step]
+            if missing:
+                raise ValueError(f"demo {i}: the observation at step {t} has no {missing}")
+        obs = {k: [step[k] for step in obs] for k in join}
     if join is not None and isinstance(obs, Mapping):  # per-key arrays: joined in this order
         obs, key = _joined(obs, join, i), join
     obs = _numeric(obs, f"demo {i}: observations")
@@ -847,10 +865,32 @@ def to_minari(demos: Any, dataset_id: str, env: Any = None, **kwargs: Any) -> An
     except ImportError as exc:
         raise ImportError('to_minari needs Minari: pip install "sb3-swirl[minari]"') from exc
 
-    buffers = []
-    for i, demo in enumerate(_as_demonstrations(demos, None, None, minimum=1)):
+    demos = _as_demonstrations(demos, None, None, minimum=1)
+    for i, demo in enumerate(demos):
         if demo.actions is None:
             raise ValueError(f"demo {i} has no actions; Minari episodes need actions")
+    obs_space, act_space = kwargs.get("observation_space"), kwargs.get("action_space")
+    if env is not None and (obs_space is None or act_space is None):
+        made = gym.make(env) if isinstance(env, str | gym.envs.registration.EnvSpec) else env
+        obs_space, act_space = obs_space or made.observation_space, act_space or made.action_space
+        if made is not env:
+            made.close()
+    if obs_space is None or act_space is None:
+        raise ValueError("to_minari needs env=, or observation_space= and action_space=")
+    keys = tuple(obs_space.spaces) if isinstance(obs_space, spaces.Dict) else None
+    parts = [obs_space[key] for key in keys] if keys is not None else [obs_space]
+    state_dim = sum(int(np.prod(part.shape or ())) for part in parts)
+    if keys is not None:  # Minari stores the env's whole observation, each key in its space
+        for i, demo in enumerate(demos):
+            if demo.state_key is None or set(demo.state_key) != set(keys):
+                raise ValueError(
+                    f"demo {i} joins the keys {demo.state_key} but the env's Dict observation "
+                    f"has {list(keys)}: Minari stores them all, so record the demos with "
+                    f"state_key={list(keys)}"
+                )
+    check_demos_fit_spaces(demos, state_dim, act_space, "demo", "the env's observations")
+    buffers = []
+    for i, demo in enumerate(demos):
         n_steps = len(demo)
         rewards = np.zeros(n_steps) if demo.rewards is None else demo.rewards
         terminations = np.zeros(n_steps, dtype=bool)
@@ -858,8 +898,8 @@ def to_minari(demos: Any, dataset_id: str, env: Any = None, **kwargs: Any) -> An
         buffers.append(
             EpisodeBuffer(
                 id=i,
-                observations=demo.observations,
-                actions=demo.actions,
+                observations=_in_space(demo.observations, obs_space, demo.state_key),
+                actions=_in_space(demo.actions, act_space, None),
                 rewards=list(rewards),
                 terminations=list(terminations),
                 truncations=[False] * n_steps,
@@ -867,6 +907,20 @@ def to_minari(demos: Any, dataset_id: str, env: Any = None, **kwargs: Any) -> An
         )
     kwargs.setdefault("data_format", "hdf5")
     return minari.create_dataset_from_buffers(dataset_id, buffers, env=env, **kwargs)
+
+
+def _in_space(values: np.ndarray, space: spaces.Space, state_key: tuple[str, ...] | None) -> Any:
+    """A demo's rows as ``space`` holds them: its dtype and shape, a ``Dict`` split back into
+    its keys (joined in ``state_key``'s order)."""
+    if isinstance(space, spaces.Dict):
+        parts, start = {}, 0
+        for key in state_key or ():
+            width = int(np.prod(space[key].shape or ()))
+            parts[key] = _in_space(values[:, start : start + width], space[key], None)
+            start += width
+        return {key: parts[key] for key in space.spaces}
+    shape = getattr(space, "shape", None) or ()
+    return np.asarray(values).reshape(len(values), *shape).astype(space.dtype)
 
 
 def make_piecewise_linear_demos(

@@ -119,6 +119,35 @@ def test_demos_that_join_other_keys_are_refused():
         [{"observations": np.zeros((5, 2)), "state_key": "obs"}, b.observations]
     )
     assert one[0].state_key == ("obs",) and one[1].state_key is None  # not recorded: not checked
+    # a state_key given that is not the one recorded: it was ignored silently
+    with pytest.raises(
+        ValueError, match=r"demo 0 joins the keys \['observation', 'desired_goal'\]"
+    ):
+        as_demonstrations([a, a], state_key=["desired_goal", "observation"])
+
+
+def test_imitation_dict_observations_and_transitions():
+    from imitation.data import rollout
+    from imitation.data.types import DictObs, Trajectory
+
+    rng = np.random.default_rng(0)
+    obs = DictObs({"a": rng.normal(size=(11, 2)), "b": rng.normal(size=(11, 1))})
+    trajectory = Trajectory(obs, np.zeros(10, dtype=int), None, True)
+    demos = as_demonstrations([trajectory] * 2, state_key=["b", "a"])  # it asked for state_key
+    assert demos[0].state_key == ("b", "a")
+    np.testing.assert_array_equal(demos[0].observations[:, 1:], obs.get("a"))
+    flat = rollout.flatten_trajectories(
+        [Trajectory(rng.normal(size=(5, 2)), np.zeros(4), None, True)]
+    )
+    with pytest.raises(ValueError, match=r"demo 0 is a single transition .*flatten_traj"):
+        as_demonstrations(flat)  # said: reshape a 1-D state sequence with x[:, None]
+
+
+def test_a_step_missing_a_key_is_named():
+    steps = [{"a": np.zeros(2), "b": np.zeros(1)} for _ in range(6)]
+    steps[3] = {"a": np.zeros(2)}
+    with pytest.raises(ValueError, match=r"demo 0: the observation at step 3 has no \['b'\]"):
+        as_demonstrations([steps, steps], state_key=["a", "b"])
 
 
 def test_dict_observations_are_joined_in_the_order_of_state_key():
@@ -174,6 +203,40 @@ def test_minari_dataset_round_trip(tmp_path, monkeypatch):
         np.testing.assert_array_equal(ours.observations, theirs.observations)
         np.testing.assert_array_equal(ours.actions, theirs.actions)
         np.testing.assert_allclose(ours.rewards, theirs.rewards)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_to_minari_writes_what_the_spaces_hold(tmp_path, monkeypatch):
+    """Joined Dict states are split back into the env's keys (Minari could not read them),
+    values cast to the spaces' dtypes, and demos that do not fit the env are refused."""
+    import minari
+
+    from sb3_swirl.supervisors import collect_demos
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    reach, keys = (
+        "sb3_swirl/FetchReachDiscrete-v0",
+        ["observation", "achieved_goal", "desired_goal"],
+    )
+    demos = collect_demos(reach, 2, seed=0, state_key=keys)
+    dataset = to_minari(demos, "swirl/reach/test-v0", env=reach)
+    episodes = list(minari.load_dataset("swirl/reach/test-v0").iterate_episodes())
+    assert dataset.observation_space.contains(
+        {k: v[0] for k, v in episodes[0].observations.items()}
+    )
+    back = as_demonstrations(episodes, state_key=keys)
+    np.testing.assert_array_equal(back[1].observations, demos[1].observations)
+    with pytest.raises(
+        ValueError, match=r"demo 0 joins the keys \('observation', 'desired_goal'\)"
+    ):
+        to_minari(collect_demos(reach, 1, seed=0, state_key=keys[::2]), "x/r/a-v0", env=reach)
+    parked = collect_demos("sb3_swirl/ParallelParking-v0", 1, seed=0)
+    cut = [Demonstration(parked[0].observations[:, :3], parked[0].actions)]
+    shifted = [Demonstration(parked[0].observations, parked[0].actions + 10)]
+    for wrong, message in [(cut, "observations have 3 dims, the env's"), (shifted, "action")]:
+        with pytest.raises(ValueError, match=f"demo 0: {message}"):
+            to_minari(wrong, "x/p/b-v0", env="sb3_swirl/ParallelParking-v0")
+    assert not (tmp_path / "x").exists()
 
 
 def test_to_minari_needs_actions():

@@ -377,7 +377,7 @@ def test_demos_and_tasks_recorded_under_another_key_order_are_caught():
         gym.make(_ids("Reach"), goal_offset=True), _goal_task([16, 17, 18]), state_key=KEYS
     )
     with pytest.raises(
-        ValueError, match=r"demonstration 0 joins the keys \['observation', 'desired"
+        ValueError, match=r"demo 0 joins the keys \['observation', 'desired.*the env's\)"
     ):
         SwirlDQN("MultiInputPolicy", env, demonstrations=demos)
     task = fit_task(demos, dims=[16, 17, 18], indicator="gmm", random_state=0)
