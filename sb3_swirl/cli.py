@@ -166,6 +166,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 
     _check_output(args.output, args.demos)
     demos = load_demos(args.demos)
+    if len(demos) < 2:
+        raise ValueError(f"{args.demos} holds 1 demonstration: SWIRL needs at least 2")
     segmentation = {"indicator": args.indicator}
     if args.window is not None:
         segmentation["window"] = args.window

@@ -701,7 +701,10 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
         if isinstance(exc, EOFError | zipfile.BadZipFile):
             hint = " (a truncated or damaged file?)"
         elif isinstance(exc, FileNotFoundError) and not os.path.splitext(name)[1]:
-            hint = " (a Minari dataset id? pass minari.load_dataset(id) instead of its id)"
+            hint = (
+                " (a Minari dataset id? In Python pass minari.load_dataset(id) instead of its "
+                "id; files on the command line are .npz files that save_demos writes)"
+            )
         raise ValueError(f"cannot read demonstrations from {name}: {exc}{hint}") from exc
     if not isinstance(loaded, np.lib.npyio.NpzFile):
         raise ValueError(

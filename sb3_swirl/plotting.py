@@ -15,7 +15,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 
-from sb3_swirl.demos import as_demonstrations
+from sb3_swirl.demos import _as_demonstrations
 from sb3_swirl.segmentation import turn_angles
 from swirl_wrappers import TaskModel
 from swirl_wrappers._io import atomic_write
@@ -73,8 +73,9 @@ def _check_task(task: Any) -> None:
 
 
 def _task_demos(demos: Any, task: TaskModel) -> list:
-    """``demos`` as demonstrations, each checked to hold the task's states (naming the demo)."""
-    demos = as_demonstrations(demos)
+    """``demos`` as demonstrations, each checked to hold the task's states (naming the demo);
+    one is enough to draw."""
+    demos = _as_demonstrations(demos, None, None, minimum=1)
     for k, demo in enumerate(demos):
         try:
             task.check_state_dim(demo.observations.shape[1])
@@ -181,7 +182,7 @@ def plot_segments(
     axis_names = _axis_names(task, names)
     ax.set_xlabel(axis_names[a])
     ax.set_ylabel(axis_names[b])
-    ax.set_title(f"{len(demos)} demonstrations, {_segments(task)}")
+    ax.set_title(f"{len(demos)} demonstration{'s' * (len(demos) != 1)}, {_segments(task)}")
     ax.autoscale_view()
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend(loc="best", fontsize="small", ncols=2)
@@ -270,9 +271,12 @@ def plot_transitions(
         pad = max(0.5, 0.01 * len(z))  # a region entered at the last step stays in view
         ax.set_xlim(-pad, len(z) - 1 + pad)
     axes[-1].set_xlabel("step")
-    fig.supylabel("speed per step in task space, each axis divided by its spread", fontsize="small")
+    fig.supylabel(
+        "speed per step in task space,\neach axis divided by its spread", fontsize="small"
+    )
     some = f"{len(shown)} of {len(demos)}" if len(shown) < len(demos) else f"{len(demos)}"
-    title = f"Transitions over time: {some} demonstrations, {_segments(task)}"
+    title = f"Transitions over time: {some} demonstration{'s' * (len(demos) != 1)}, "
+    title += _segments(task)
     if candidates is None:
         title += "\n(candidates not shown: the task was fitted on other demonstrations)"
     fig.suptitle(title, fontsize="medium")

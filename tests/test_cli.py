@@ -36,6 +36,12 @@ def test_demos_fit_show_round_trip(tmp_path, capsys):
     assert main(["show", str(task_path), "--plot", str(figs), "--demos", str(demos_path)]) == 0
     assert (figs / "rewards.png").stat().st_size > 0
     assert (figs / "segments.png").stat().st_size > 0
+    # one demo: enough to draw, not to fit (the message names the file)
+    one = tmp_path / "one.npz"
+    save_demos(demos[:1], one)
+    assert main(["show", str(task_path), "--plot", str(figs), "--demos", str(one)]) == 0
+    assert main(["fit", str(one), "-o", str(tmp_path / "one.json")]) == 2
+    assert "one.npz holds 1 demonstration: SWIRL needs at least 2" in capsys.readouterr().err
 
 
 def test_fit_with_angles_matches_the_python_api(tmp_path):
