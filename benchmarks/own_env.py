@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> None:
         for r in mine:
             print(
                 f"  {env_id} seed {r['seed']}: {r['over_run']:.2f} ({r['final']:.2f}), "
-                f"{r['segments']} segments"
+                f"{r['segments']} segment" + "s" * (r["segments"] != 1)
             )
         over, final = np.mean([r["over_run"] for r in mine]), np.mean([r["final"] for r in mine])
         print(f"{env_id}: success over the run {over:.2f} (at the end {final:.2f})")
