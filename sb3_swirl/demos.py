@@ -631,7 +631,9 @@ def _rate_ratios(states: Sequence[np.ndarray], spread: np.ndarray) -> np.ndarray
     return ratios
 
 
-def save_demos(demos: Any, path: str | os.PathLike) -> None:
+def save_demos(
+    demos: Any, path: str | os.PathLike, state_key: str | Sequence[str] | None = None
+) -> None:
     """Write demonstrations to an uncompressed ``.npz`` file (exact round trip).
 
     Demonstration ``i`` is stored under ``obs_i`` and, when present, ``acts_i``, ``rews_i`` and
@@ -641,6 +643,9 @@ def save_demos(demos: Any, path: str | os.PathLike) -> None:
     ----------
     demos : anything :func:`as_demonstrations` accepts
     path : str or path-like
+    state_key : str or sequence of str, optional
+        For demos with dict observations: the keys whose values are joined into each state,
+        in this order (recorded with them), as in :func:`as_demonstrations`.
 
     Raises
     ------
@@ -652,7 +657,7 @@ def save_demos(demos: Any, path: str | os.PathLike) -> None:
             f"save_demos(demos, path) takes the demos first; got the path {os.fspath(demos)!r} "
             f"first and a {type(path).__name__} second"
         )
-    demos = _as_demonstrations(demos, None, None, minimum=1)
+    demos = _as_demonstrations(demos, None, state_key, minimum=1)
     arrays: dict[str, np.ndarray] = {
         "format": np.array(_NPZ_FORMAT),
         "n_demos": np.array(len(demos)),

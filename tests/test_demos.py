@@ -175,6 +175,14 @@ def test_dict_observations_are_joined_in_the_order_of_state_key():
         as_demonstrations(episodes)
 
 
+def test_save_demos_joins_dict_observations_with_state_key(tmp_path):
+    """Its error said "pass state_key=", which save_demos did not take."""
+    steps = [{"a": np.full(2, t), "b": np.full(1, -t)} for t in range(6)]
+    save_demos([steps, steps], tmp_path / "d.npz", state_key=["b", "a"])
+    back = load_demos(tmp_path / "d.npz")
+    assert back[0].state_key == ("b", "a") and back[0].observations[3].tolist() == [-3, 3, 3]
+
+
 def test_load_rejects_foreign_and_missing_files(tmp_path):
     path = tmp_path / "other.npz"
     np.savez(path, x=np.zeros(3))
