@@ -190,7 +190,7 @@ def test_load_rejects_foreign_and_missing_files(tmp_path):
         load_demos(path)
     with pytest.raises(ValueError, match=r"cannot read demonstrations.*No such file.*npz'$"):
         load_demos(tmp_path / "missing.npz")
-    with pytest.raises(ValueError, match=r"a Minari dataset id\? In Python pass minari.load_dataset"):
+    with pytest.raises(ValueError, match=r"Minari dataset id\? In Python pass minari.load_dataset"):
         as_demonstrations("D4RL/door/human-v2")
 
 
