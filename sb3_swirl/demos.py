@@ -24,7 +24,7 @@ from gymnasium import spaces
 
 from swirl_wrappers._io import atomic_write
 from swirl_wrappers._validation import check_int
-from swirl_wrappers.wrappers import _key_tuple
+from swirl_wrappers.wrappers import _key_tuple, state_space
 
 _NPZ_FORMAT = "sb3_swirl.demos/1"
 # Larger observations overflow float64 when squared (covariances, quadratic rewards).
@@ -868,8 +868,7 @@ def to_minari(demos: Any, dataset_id: str, env: Any = None, **kwargs: Any) -> An
     minari.MinariDataset
     """
     try:
-        import minari
-        from minari.data_collector import EpisodeBuffer
+        import minari  # noqa: F401
     except ImportError as exc:
         raise ImportError('to_minari needs Minari: pip install "sb3-swirl[minari]"') from exc
 
@@ -877,17 +876,26 @@ def to_minari(demos: Any, dataset_id: str, env: Any = None, **kwargs: Any) -> An
     for i, demo in enumerate(demos):
         if demo.actions is None:
             raise ValueError(f"demo {i} has no actions; Minari episodes need actions")
-    obs_space, act_space = kwargs.get("observation_space"), kwargs.get("action_space")
-    if env is not None and (obs_space is None or act_space is None):
-        made = gym.make(env) if isinstance(env, str | gym.envs.registration.EnvSpec) else env
-        obs_space, act_space = obs_space or made.observation_space, act_space or made.action_space
+    made = gym.make(env) if isinstance(env, str | gym.envs.registration.EnvSpec) else env
+    try:  # made once: Minari reads the spec and spaces of the env it is given
+        return _write_minari(demos, dataset_id, made, kwargs)
+    finally:
         if made is not env:
             made.close()
+
+
+def _write_minari(demos: list[Demonstration], dataset_id: str, env: Any, kwargs: dict) -> Any:
+    """:func:`to_minari` once ``env`` is made (or ``None``)."""
+    import minari
+    from minari.data_collector import EpisodeBuffer
+
+    obs_space = kwargs.get("observation_space", getattr(env, "observation_space", None))
+    act_space = kwargs.get("action_space", getattr(env, "action_space", None))
     if obs_space is None or act_space is None:
         raise ValueError("to_minari needs env=, or observation_space= and action_space=")
     keys = tuple(obs_space.spaces) if isinstance(obs_space, spaces.Dict) else None
-    parts = [obs_space[key] for key in keys] if keys is not None else [obs_space]
-    state_dim = sum(int(np.prod(part.shape or ())) for part in parts)
+    joined = obs_space if keys is None else state_space(obs_space, keys)[0]
+    state_dim = int(np.prod(joined.shape))
     if keys is not None:  # Minari stores the env's whole observation, each key in its space
         for i, demo in enumerate(demos):
             if demo.state_key is None or set(demo.state_key) != set(keys):
