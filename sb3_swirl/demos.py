@@ -46,12 +46,18 @@ class Demonstration:
         For the states of a ``Dict`` observation, the keys whose values each state joins, in
         order (``collect_demos(..., state_key=...)`` records them): a SWIRL wrapper, SwirlDQN
         and the zoo refuse, or warn about, another order. ``None``: not recorded.
+    truncated : bool, default False
+        The demo was cut short (a time limit, gymnasium's ``truncated``) rather than ending
+        where its episode terminates: TD learning on it (SwirlDQN's ``prefill_replay``)
+        bootstraps from its last state instead of taking it as terminal. ``collect_demos``
+        records it; imitation's ``terminal=False`` and Minari's truncations read as it.
     """
 
     observations: np.ndarray
     actions: np.ndarray | None = None
     rewards: np.ndarray | None = None
     state_key: tuple[str, ...] | None = None
+    truncated: bool = False
 
     def __len__(self) -> int:
         """Number of transitions ``T``."""
@@ -124,7 +130,7 @@ def _joined(obs: Mapping, keys: tuple[str, ...], i: int) -> np.ndarray:
 def _to_demonstration(item: Any, i: int, state_key: tuple[str, ...] | None = None) -> Demonstration:
     """Convert one item (array, Demonstration, imitation or Minari episode) and check it;
     dict observations are joined in the order of ``state_key`` (then recorded with it)."""
-    key = None
+    key, truncated = None, _truncated(item, i)
     if isinstance(item, Demonstration):
         obs, acts, rews, key = item.observations, item.actions, item.rewards, item.state_key
     else:
@@ -218,7 +224,28 @@ def _to_demonstration(item: Any, i: int, state_key: tuple[str, ...] | None = Non
         if bad is not None:
             raise ValueError(f"demo {i}: rewards contain NaN or inf (first at step {bad})")
         rews = rews.astype(np.float64)
-    return Demonstration(np.array(obs, dtype=np.float64), acts, rews, key)
+    return Demonstration(np.array(obs, dtype=np.float64), acts, rews, key, truncated)
+
+
+def _truncated(item: Any, i: int) -> bool:
+    """Whether an episode record ends in a truncation: a ``truncated`` field, imitation's
+    ``terminal`` (False: cut short) or Minari's ``terminations`` (last step not one)."""
+    has, value = _field(item, ("truncated",))
+    if not has:
+        has, value = _field(item, ("terminal",))
+        if has:
+            value = value is not None and not value  # imitation: terminal=None is unknown
+    if not has:
+        has, value = _field(item, ("terminations",))
+        if has:
+            value = np.asarray(value)
+            value = value.size > 0 and not value.reshape(-1)[-1]
+    if not has or value is None:
+        return False
+    flag = np.asarray(value)
+    if flag.shape != () or flag.dtype.kind not in "bi" or flag.item() not in (0, 1):
+        raise ValueError(f"demo {i}: truncated must be one bool, got {value!r}")
+    return bool(flag)
 
 
 def as_demonstrations(
@@ -636,8 +663,9 @@ def save_demos(
 ) -> None:
     """Write demonstrations to an uncompressed ``.npz`` file (exact round trip).
 
-    Demonstration ``i`` is stored under ``obs_i`` and, when present, ``acts_i``, ``rews_i`` and
-    ``keys_i`` (its ``state_key``), so ragged lengths need no padding.
+    Demonstration ``i`` is stored under ``obs_i`` and, when present, ``acts_i``, ``rews_i``,
+    ``keys_i`` (its ``state_key``) and ``trunc_i`` (when ``truncated``), so ragged lengths
+    need no padding.
 
     Parameters
     ----------
@@ -670,6 +698,8 @@ def save_demos(
             arrays[f"rews_{i}"] = demo.rewards
         if demo.state_key is not None:
             arrays[f"keys_{i}"] = np.array(demo.state_key)
+        if demo.truncated:
+            arrays[f"trunc_{i}"] = np.array(True)
     with atomic_write(path, "wb") as fh:  # a failure leaves the previous file
         np.savez(fh, **arrays)
 
@@ -748,7 +778,7 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
                 "a damaged or hand-edited file?"
             )
         expected = {"format", "n_demos"} | {
-            f"{field}_{i}" for i in range(n) for field in ("obs", "acts", "rews", "keys")
+            f"{field}_{i}" for i in range(n) for field in ("obs", "acts", "rews", "keys", "trunc")
         }
         if files - expected:
             raise ValueError(
@@ -767,6 +797,7 @@ def load_demos(path: str | os.PathLike) -> list[Demonstration]:
                     "state_key": [str(k) for k in np.atleast_1d(read(f"keys_{i}")).tolist()]
                     if f"keys_{i}" in files
                     else None,
+                    "truncated": read(f"trunc_{i}") if f"trunc_{i}" in files else False,
                 }
             )
     try:
@@ -808,7 +839,7 @@ def to_imitation(demos: Any) -> list[Any]:
     """Export demonstrations as ``imitation`` trajectories.
 
     Each demonstration becomes a ``TrajectoryWithRew`` when it has rewards, else a
-    ``Trajectory``; all are complete episodes (``terminal=True``).
+    ``Trajectory``; ``terminal`` is ``not demo.truncated``.
 
     Parameters
     ----------
@@ -833,12 +864,13 @@ def to_imitation(demos: Any) -> list[Any]:
     for i, demo in enumerate(_as_demonstrations(demos, None, None, minimum=1)):
         if demo.actions is None:
             raise ValueError(f"demo {i} has no actions; imitation trajectories need actions")
+        terminal = not demo.truncated
         if demo.rewards is None:
-            out.append(Trajectory(demo.observations, demo.actions, infos=None, terminal=True))
+            out.append(Trajectory(demo.observations, demo.actions, infos=None, terminal=terminal))
         else:
             out.append(
                 TrajectoryWithRew(
-                    demo.observations, demo.actions, infos=None, terminal=True, rews=demo.rewards
+                    demo.observations, demo.actions, None, terminal, rews=demo.rewards
                 )
             )
     return out
@@ -847,8 +879,8 @@ def to_imitation(demos: Any) -> list[Any]:
 def to_minari(demos: Any, dataset_id: str, env: Any = None, **kwargs: Any) -> Any:
     """Write demonstrations as a local Minari dataset (``minari.create_dataset_from_buffers``).
 
-    Each demonstration becomes one episode that terminates on its last step. Missing rewards
-    are written as zeros.
+    Each demonstration becomes one episode that ends on its last step, in a truncation where
+    the demo is ``truncated``, else in a termination. Missing rewards are written as zeros.
 
     Parameters
     ----------
@@ -909,16 +941,15 @@ def _write_minari(demos: list[Demonstration], dataset_id: str, env: Any, kwargs:
     for i, demo in enumerate(demos):
         n_steps = len(demo)
         rewards = np.zeros(n_steps) if demo.rewards is None else demo.rewards
-        terminations = np.zeros(n_steps, dtype=bool)
-        terminations[-1] = True
+        ends = np.arange(n_steps) == n_steps - 1
         buffers.append(
             EpisodeBuffer(
                 id=i,
                 observations=_in_space(demo.observations, obs_space, demo.state_key),
                 actions=_in_space(demo.actions, act_space, None),
                 rewards=list(rewards),
-                terminations=list(terminations),
-                truncations=[False] * n_steps,
+                terminations=list(ends & (not demo.truncated)),
+                truncations=list(ends & demo.truncated),
             )
         )
     kwargs.setdefault("data_format", "hdf5")

@@ -638,10 +638,10 @@ class SwirlDQN(DQN):
         """Each demo's transitions as the agent sees them, replayed through the wrappers'
         :class:`SegmentTracker`: lifted observations, proxy rewards and segments.
 
-        The last transition of a demo is terminal (demos end when the task is done); with
-        ``terminate_on_completion`` a demo ends on the step that reaches the last region, as
-        the wrapper's episode would. Demos without rewards are taken to end in success: task
-        reward 1 on their last transition.
+        The last transition of a demo is terminal (demos end when the task is done) unless the
+        demo is ``truncated``; with ``terminate_on_completion`` a demo ends on the step that
+        reaches the last region, as the wrapper's episode would. Demos without rewards are
+        taken to end in success: task reward 1 on their last transition.
         """
         task = self.task
         assert task is not None
@@ -659,9 +659,10 @@ class SwirlDQN(DQN):
                 task_rewards[-1] = 1.0
             tracker = SegmentTracker(task, self.reward_config, None, self.terminate_on_completion)
             tracker.reset(states[0])
-            index, rewards = [tracker.index], []
+            index, rewards, terminated = [tracker.index], [], False
             for t in range(n):
-                reward, terminated = tracker.step(states[t + 1], task_rewards[t], t == n - 1)
+                ends = t == n - 1 and not demo.truncated
+                reward, terminated = tracker.step(states[t + 1], task_rewards[t], ends)
                 index.append(tracker.index)
                 rewards.append(float(reward))
                 if terminated:
@@ -677,7 +678,9 @@ class SwirlDQN(DQN):
                     "segment": np.array(index[:-1]),
                     "reward": np.array(rewards),
                     "task_reward": np.asarray(task_rewards[: len(rewards)], dtype=np.float64),
-                    "done": np.arange(len(rewards)) == len(rewards) - 1,
+                    # the last transition ends the demo: in a termination, or a truncation
+                    "done": (np.arange(len(rewards)) == len(rewards) - 1) & bool(terminated),
+                    "end": np.arange(len(rewards)) == len(rewards) - 1,
                     "actions": None if demo.actions is None else demo.actions[: len(rewards)],
                     "states": states[: len(index)],
                 }
@@ -895,10 +898,10 @@ class SwirlDQN(DQN):
 
         Each env column gets a contiguous run of the transitions (the last column wraps around
         to the first ones), so an n-step buffer reads a demo in order; where a column's run
-        cuts a demo short, the cut ends an episode as a time-limit truncation does, so no
-        return is read across it into the next column's or the online transitions, and
-        ``HerReplayBuffer`` draws no goal from beyond it. The infos hold the rewards' parts,
-        as the wrapper's steps do, for ``SwirlWrapper.compute_reward``.
+        cuts a demo short, or a ``truncated`` demo ends, the end is a time-limit truncation, so
+        no return is read across it into the next demo, the next column's or the online
+        transitions, and ``HerReplayBuffer`` draws no goal from beyond it. The infos hold the
+        rewards' parts, as the wrapper's steps do, for ``SwirlWrapper.compute_reward``.
         """
         n, n_envs = len(data["actions"]), self.n_envs
         length = -(-n // n_envs)
@@ -906,7 +909,7 @@ class SwirlDQN(DQN):
         goals = data["next_obs"].get("desired_goal") if isinstance(data["obs"], dict) else None
         for t, rows in enumerate(order):
             done = data["done"][rows]
-            truncated = ~done & (t == length - 1)
+            truncated = ~done & (data["end"][rows] | (t == length - 1))
             infos: list[dict[str, Any]] = [
                 {
                     "TimeLimit.truncated": bool(truncated[i]),

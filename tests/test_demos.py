@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
@@ -71,13 +72,18 @@ def test_real_imitation_trajectories_round_trip():
         Demonstration(rng.normal(size=(n + 1, 3)), rng.integers(0, 4, size=n), rng.normal(size=n))
         for n in (6, 9)
     ]
+    demos[1] = Demonstration(demos[1].observations, demos[1].actions, truncated=True)
     trajs = to_imitation(demos)
-    assert all(isinstance(t, TrajectoryWithRew) and t.terminal for t in trajs)
+    assert isinstance(trajs[0], TrajectoryWithRew) and type(trajs[1]) is Trajectory
+    assert [t.terminal for t in trajs] == [True, False]  # a truncated demo: not terminal
     back = as_demonstrations(trajs)
+    assert [d.truncated for d in back] == [False, True]
     for a, b in zip(demos, back, strict=True):
         np.testing.assert_array_equal(a.observations, b.observations)
         np.testing.assert_array_equal(a.actions, b.actions)
-        np.testing.assert_array_equal(a.rewards, b.rewards)
+        assert (a.rewards is None) == (b.rewards is None)
+        if a.rewards is not None:
+            np.testing.assert_array_equal(a.rewards, b.rewards)
     no_rew = to_imitation([Demonstration(d.observations, d.actions) for d in demos])
     assert type(no_rew[0]) is Trajectory
     with pytest.raises(ValueError, match="demo 1 has no actions"):
@@ -91,21 +97,41 @@ def test_npz_round_trip_is_exact(tmp_path):
         Demonstration(rng.normal(size=(5, 2)), np.array([0, 3, 1, 2], dtype=np.int64)),
         Demonstration(rng.normal(size=(4, 2)), rng.normal(size=3), rng.normal(size=3)),
         Demonstration(rng.normal(size=(4, 2)), state_key=("observation", "desired_goal")),
+        Demonstration(rng.normal(size=(3, 2)), truncated=True),
     ]
     path = tmp_path / "demos.npz"
     with pytest.raises(TypeError, match="demos first"):
         save_demos(path, demos)
     save_demos(demos, path)
     for loaded in (load_demos(path), as_demonstrations(path), as_demonstrations(str(path))):
-        assert len(loaded) == 4
+        assert len(loaded) == 5
         for a, b in zip(demos, loaded, strict=True):
-            assert a.state_key == b.state_key
+            assert a.state_key == b.state_key and a.truncated is b.truncated
             np.testing.assert_array_equal(a.observations, b.observations)
             for x, y in ((a.actions, b.actions), (a.rewards, b.rewards)):
                 assert (x is None) == (y is None)
                 if x is not None:
                     assert x.dtype == y.dtype
                     np.testing.assert_array_equal(x, y)
+
+
+def test_truncation_is_read_from_each_format_and_checked():
+    """imitation's terminal=False and Minari's last step not a termination read as truncated;
+    a flag that is not one bool is named."""
+    states = np.zeros((3, 1))
+    records = [
+        SimpleNamespace(obs=states, acts=np.zeros(2), terminal=False),
+        SimpleNamespace(obs=states, acts=np.zeros(2), terminal=None),  # imitation: unknown
+        SimpleNamespace(observations=states, actions=np.zeros(2), terminations=[0, 0]),
+        SimpleNamespace(observations=states, actions=np.zeros(2), terminations=[0, 1]),
+        {"observations": states, "truncated": np.True_},
+        states,
+    ]
+    read = [d.truncated for d in as_demonstrations(records)]
+    assert read == [True, False, True, False, True, False]
+    for flag in ("yes", [True, False], 2):
+        with pytest.raises(ValueError, match="demo 1: truncated must be one bool, got"):
+            as_demonstrations([states, {"observations": states, "truncated": flag}])
 
 
 def test_demos_that_join_other_keys_are_refused():
@@ -203,10 +229,12 @@ def test_minari_dataset_round_trip(tmp_path, monkeypatch):
 
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
     demos = collect_demos("sb3_swirl/ParallelParking-v0", 2, seed=0)
+    demos[1] = dataclasses.replace(demos[1], truncated=True)
     to_minari(demos, "swirl/parking/test-v0", env="sb3_swirl/ParallelParking-v0")
     episodes = list(minari.load_dataset("swirl/parking/test-v0").iterate_episodes())
+    assert [(e.terminations[-1], e.truncations[-1]) for e in episodes] == [(1, 0), (0, 1)]
     back = as_demonstrations(episodes)
-    assert len(back) == 2
+    assert [d.truncated for d in back] == [False, True]
     for ours, theirs in zip(demos, back, strict=True):
         np.testing.assert_array_equal(ours.observations, theirs.observations)
         np.testing.assert_array_equal(ours.actions, theirs.actions)

@@ -410,6 +410,44 @@ def test_prefill_matches_what_the_wrapper_shows(wrapper_kwargs):
     assert buffer.size() == row
 
 
+@pytest.mark.parametrize("n_envs", [1, 2])
+def test_prefill_bootstraps_from_the_end_of_a_truncated_demo(n_envs):
+    """A demo cut by a time limit ends in the buffer as the wrapper's episode ends at that
+    limit: a truncation (SB3's timeouts), paid as a step that does not terminate (potential
+    shaping keeps the last state's potential); not as a terminal state."""
+    config = dict(mode="potential", task_reward_weight=1.0, gamma=0.9)
+    cut = [
+        Demonstration(d.observations[:6], d.actions[:5], np.zeros(5), truncated=True)
+        for d in point_demos(2)
+    ]
+    model = SwirlDQN(
+        "MlpPolicy",
+        DummyVecEnv([lambda: point_env(reward_config=config)] * n_envs),
+        demonstrations=cut,
+        prefill_replay=True,
+        bc_epochs=1,
+        gamma=0.9,
+        seed=0,
+    )
+    model.pretrain()
+    data, buffer = model._demo_data, model.replay_buffer
+    assert not data["done"].any() and data["end"].sum() == 2
+    env = SwirlWrapper(gym.wrappers.TimeLimit(PointEnv(), 5), point_task(), reward_config=config)
+    rewards, ends = [], []
+    for k, demo in enumerate(cut):
+        env.reset(seed=k)
+        for action in demo.actions:
+            _, reward, terminated, truncated, _ = env.step(int(action))
+            assert not terminated
+            rewards.append(reward)
+            ends.append(truncated)
+    np.testing.assert_allclose(data["reward"], rewards, atol=1e-6)
+    # each env column holds a contiguous run of the transitions, in order
+    slots = buffer.timeouts[: buffer.pos].T.ravel()[: len(ends)]
+    np.testing.assert_array_equal(slots, ends)
+    np.testing.assert_array_equal(buffer.dones[: buffer.pos].T.ravel()[: len(ends)], ends)
+
+
 def test_prefill_warns_of_demos_without_rewards_where_the_env_reward_counts():
     """TD learning on such demos reads an env reward of 0 a step and 1 at the end: not the
     env's own (MountainCar pays -1 a step)."""

@@ -114,6 +114,7 @@ def demos():
 def test_supervisor_demos_succeed_with_phases(demos):
     for demo, phase in zip(*demos, strict=True):
         assert len(demo.actions) == 100
+        assert demo.truncated  # the time limit ends the episode: its last state is no terminal
         assert set(np.unique(phase)) == {REACH, GRASP, LIFT, TENSION}
         assert demo.observations[-1, 5] < 0.05
     # same seed, same demos

@@ -69,6 +69,7 @@ def test_collect_demos_shapes_and_dtypes(acrobot_demos):
         # sparse task reward: 1 on the last (successful) step only
         assert demo.rewards[-1] == 1.0 and demo.rewards[:-1].sum() == 0.0
         assert np.abs(demo.observations[0]).max() <= 0.1  # starts hanging down
+        assert not demo.truncated  # it ends at the goal, a termination
         assert 1 < t < 1000
 
 

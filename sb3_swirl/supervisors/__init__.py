@@ -129,7 +129,8 @@ def collect_demos(
     Returns
     -------
     list of Demonstration
-        ``observations`` (T + 1, d) float64, ``actions`` (T,) int64, ``rewards`` (T,) float64.
+        ``observations`` (T + 1, d) float64, ``actions`` (T,) int64, ``rewards`` (T,) float64;
+        ``truncated`` where the episode ended at the env's time limit (tensioning's do).
         With ``return_phases``, a tuple of that list and the list of phase arrays.
 
     Raises
@@ -237,6 +238,7 @@ def _run_episode(
         actions=np.asarray(actions, dtype=np.int64),
         rewards=np.asarray(rewards, dtype=np.float64),
         state_key=None if state_key is None else _key_tuple(state_key),
+        truncated=bool(truncated and not terminated),  # a time limit: not a terminal state
     )
     return demo, np.asarray(phases, dtype=np.int64)
 
