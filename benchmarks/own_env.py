@@ -52,7 +52,9 @@ def record_demos(env_id: str, path: Path, n: int = 10) -> None:
             actions.append(action)
             rewards.append(reward)
             done = terminated or truncated
-        demos.append(Demonstration(np.array(states), np.array(actions), np.array(rewards)))
+        # CartPole's demos balance until the time limit: not a terminal state
+        arrays = np.array(states), np.array(actions), np.array(rewards)
+        demos.append(Demonstration(*arrays, truncated=not terminated))
     save_demos(demos, path)
 
 

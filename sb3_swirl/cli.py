@@ -130,6 +130,20 @@ def _check_output(output: str, *inputs: str | None) -> None:
         raise ValueError(f"the output {output} is not writable")
 
 
+class _DemoHelp(argparse.Action):
+    """``demo --help``, ending with every task's defaults (read from the zoo entries only
+    when asked, not at every start)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: Any) -> None:
+        defaults = "; ".join(
+            f"{name}: {preset.n_demos} demos, {preset.total_timesteps} steps"
+            for name, preset in sorted(PRESETS.items())
+        )
+        parser.epilog = f"the tasks' defaults: {defaults}"
+        parser.print_help()
+        parser.exit()
+
+
 def _cmd_demos(args: argparse.Namespace) -> int:
     from sb3_swirl.demos import save_demos
     from sb3_swirl.supervisors import collect_demos
@@ -153,9 +167,11 @@ def _cmd_demos(args: argparse.Namespace) -> int:
     Path(args.output).parent.mkdir(parents=True, exist_ok=True)
     save_demos(demos, args.output)
     lengths = [len(d) for d in demos]
+    cut = sum(d.truncated for d in demos)
     console.print(
         f"wrote {len(demos)} demos of {args.env_id} to {args.output} "
-        f"(lengths {min(lengths)}–{max(lengths)} steps)"
+        f"(lengths {min(lengths)}–{max(lengths)} steps"
+        + (f"; {cut} ended at the env's time limit, recorded as truncated)" if cut else ")")
     )
     return 0
 
@@ -501,15 +517,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_show)
 
-    p = sub.add_parser("demo", help="the main job: SWIRL vs DQN on a shipped task")
+    p = sub.add_parser("demo", help="the main job: SWIRL vs DQN on a shipped task", add_help=False)
+    p.add_argument(
+        "-h", "--help", action=_DemoHelp, nargs=0, help="show this help message and exit"
+    )
     p.add_argument("task", choices=sorted(PRESETS), metavar="TASK", help=", ".join(sorted(PRESETS)))
     p.add_argument("--seed", type=_seed, default=0, help="seed of the demos and agents (default 0)")
-    p.add_argument("--n-demos", type=int, default=None, help="default: the task's (5 on parking)")
+    p.add_argument("--n-demos", type=int, default=None, help="default: the task's (listed below)")
     p.add_argument(
         "--timesteps",
         type=int,
         default=None,
-        help="training steps per method (default: the task's, 30000 on parking; fewer for a "
+        help="training steps per method (default: the task's, listed below; fewer for a "
         "quick look)",
     )
     p.add_argument("--out", default="results", help="output folder (default results/)")

@@ -173,6 +173,15 @@ def test_every_preset_has_tuned_hyperparameters_for_both_methods():
         assert swirl["policy_kwargs"] == dqn["policy_kwargs"]
 
 
+def test_demo_help_lists_every_tasks_defaults(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["demo", "--help"])
+    said = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+    assert exit_.value.code == 0
+    for name, preset in PRESETS.items():
+        assert f"{name}: {preset.n_demos} demos, {preset.total_timesteps} steps" in said
+
+
 def test_rollouts_to_success_is_the_first_evaluation_at_target():
     curve = [
         {"episodes": 10, "success_rate": 0.5},
