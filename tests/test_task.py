@@ -245,6 +245,8 @@ def test_metadata_that_json_cannot_write_is_refused_at_construction():
     task = random_task(0)
     with pytest.raises(ValueError, match=r"metadata must be JSON-serialisable: .*float32"):
         TaskModel(task.regions, task.rewards, metadata={"x": np.float32(1.0)})
+    with pytest.raises(ValueError, match=r"metadata must be JSON-serialisable: .*float values"):
+        TaskModel(task.regions, task.rewards, metadata={"score": float("nan")})  # no JSON
     with pytest.raises(ValueError, match="metadata must be a dict, got str"):
         TaskModel(task.regions, task.rewards, metadata="fitted by hand")
 

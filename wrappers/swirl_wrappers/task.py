@@ -633,7 +633,7 @@ class TaskModel:
         if not isinstance(self.metadata, dict):
             raise ValueError(f"metadata must be a dict, got {type(self.metadata).__name__}")
         try:  # checked now: a task that to_json cannot write would be lost
-            json.dumps(self.metadata)
+            json.dumps(self.metadata, allow_nan=False)  # NaN is no JSON: other readers fail
         except (TypeError, ValueError) as exc:
             raise ValueError(f"metadata must be JSON-serialisable: {exc}") from exc
         for name, value in (
@@ -979,7 +979,7 @@ class TaskModel:
 
     def to_json(self, path: str | os.PathLike | None = None) -> str:
         """Serialise to a JSON string; also write it to ``path`` (atomically) if given."""
-        text = json.dumps(self.to_dict(), indent=1)
+        text = json.dumps(self.to_dict(), indent=1, allow_nan=False)
         if path is not None:
             with atomic_write(path) as fh:
                 fh.write(text)
