@@ -28,7 +28,7 @@ from swirl_wrappers.wrappers import (
     TASK_REWARD_KEY,
     StateKey,
     TrackedTask,
-    _refuse_normalised_states,
+    _refuse_below,
 )
 
 __all__ = ["SwirlVecEnv", "get_swirl_attr", "make_swirl_env"]
@@ -115,7 +115,15 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
                     f"SwirlVecEnv must sit below {name}: the task reads raw states. Wrap as "
                     f"{name}(SwirlVecEnv(venv, task)), not SwirlVecEnv({name}(venv), task)"
                 )
-        _refuse_normalised_states(venv, "SwirlVecEnv")  # gymnasium's, in its sub-envs
+        if unwrap_vec_wrapper(venv, SwirlVecEnv) is not None or any(
+            venv.env_is_wrapped(SwirlWrapper)
+        ):
+            raise ValueError(
+                "SwirlVecEnv over a vector env that is lifted already (a SwirlVecEnv below, or "
+                "sub-envs wrapped with SwirlWrapper, as make_swirl_env makes them): lift the "
+                "observations once"
+            )
+        _refuse_below(venv, "SwirlVecEnv")  # gymnasium's wrappers, in its sub-envs
         self.lifter = Lifter(venv.observation_space, task, state_key)
         self.tracker = SegmentTracker(task, reward_config, num_envs=venv.num_envs)
         super().__init__(venv, observation_space=self.lifter.observation_space)
@@ -177,6 +185,11 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
             info[SEGMENT_KEY] = index
             info[TASK_REWARD_KEY] = task_reward
             info[SEGMENT_REWARD_KEY] = reward
+        for i in done:  # the new episodes' reset infos, as SB3's VecEnvs keep them
+            self.reset_infos[i] = {
+                **self.venv.reset_infos[i],
+                SEGMENT_KEY: int(self.tracker.index[i]),
+            }
         lifted = self.lifter.lift(obs, self.tracker.index)
         return lifted, rewards.astype(np.float32), dones, infos
 

@@ -590,6 +590,107 @@ def test_sub_envs_that_normalise_their_observations_are_refused():
             make()
 
 
+@pytest.mark.parametrize(
+    "make, match",
+    [
+        (
+            lambda: SwirlWrapper(gym.wrappers.Autoreset(PointEnv()), line_task()),
+            r"must sit below Autoreset.*Wrap as Autoreset\(SwirlWrapper",
+        ),
+        (
+            lambda: SwirlWrapper(SwirlWrapper(PointEnv(), line_task()), line_task()),
+            "SwirlWrapper over SwirlWrapper: the env's observations are lifted already",
+        ),
+        (
+            lambda: SwirlVectorWrapper(
+                SwirlVectorWrapper(SyncVectorEnv([PointEnv]), line_task()), line_task()
+            ),
+            "SwirlVectorWrapper over SwirlVectorWrapper: .* lifted already",
+        ),
+        (
+            lambda: SwirlVectorWrapper(
+                SyncVectorEnv([lambda: SwirlWrapper(PointEnv(), line_task())]), line_task()
+            ),
+            "sub-env 0 is wrapped with a SWIRL wrapper already",
+        ),
+        (
+            lambda: SwirlVecEnv(SwirlVecEnv(DummyVecEnv([PointEnv]), line_task()), line_task()),
+            "SwirlVecEnv over a vector env that is lifted already",
+        ),
+        (
+            lambda: SwirlVecEnv(
+                DummyVecEnv([lambda: SwirlWrapper(PointEnv(), line_task())]), line_task()
+            ),
+            "SwirlVecEnv over a vector env that is lifted already",
+        ),
+        (
+            lambda: SwirlWrapper(SyncVectorEnv([PointEnv]), line_task()),
+            "SwirlWrapper wraps one env, got the vector env SyncVectorEnv: .*SwirlVectorWrapper",
+        ),
+        (
+            lambda: SwirlWrapper(DummyVecEnv([PointEnv]), line_task()),
+            "got the vector env DummyVecEnv: .*SwirlVecEnv",
+        ),
+        (
+            lambda: SwirlWrapper(
+                gym.wrappers.RecordEpisodeStatistics(PointEnv()),
+                line_task(),
+                terminate_on_completion=True,
+            ),
+            r"must sit below RecordEpisodeStatistics.*only the failed ones",
+        ),
+    ],
+    ids=[
+        "Autoreset",
+        "twice",
+        "vector twice",
+        "vector over lifted sub-envs",
+        "SB3 twice",
+        "SB3 over lifted sub-envs",
+        "vector env",
+        "SB3 vector env",
+        "episode statistics",
+    ],
+)
+def test_wrappers_that_would_break_the_tracker_are_refused(make, match):
+    """Each of these ran silently: Autoreset below scored a new episode's first state as a
+    step of the old one, in its segment; a second wrapper lifted the observations twice;
+    RecordEpisodeStatistics below never saw the episodes the wrapper ends."""
+    with pytest.raises(ValueError, match=match):
+        make()
+    # the right orders work
+    env = gym.wrappers.Autoreset(SwirlWrapper(PointEnv(max_steps=2), line_task()))
+    env.reset(seed=0)
+    for _ in range(3):  # the third step resets (gymnasium's Autoreset: the next step)
+        env.step(UP)
+    assert env.get_wrapper_attr("tracker").t == 0
+    gym.wrappers.RecordEpisodeStatistics(
+        SwirlWrapper(PointEnv(), line_task(), terminate_on_completion=True)
+    )
+    SwirlWrapper(gym.wrappers.RecordEpisodeStatistics(PointEnv()), line_task())  # no ending
+
+
+def test_swirl_vec_env_keeps_the_new_episodes_reset_infos():
+    """After an autoreset, reset_infos holds the sub-env's new reset info and segment, as
+    make_swirl_env's SB3 VecEnv does; it kept the first reset's."""
+
+    class CountingResets(PointEnv):
+        resets = 0
+
+        def reset(self, *, seed=None, options=None):
+            obs, info = super().reset(seed=seed, options=options)
+            self.resets += 1
+            return obs, info | {"resets": self.resets}
+
+    venv = SwirlVecEnv(DummyVecEnv([lambda: CountingResets(max_steps=2)] * 2), line_task())
+    venv.reset()
+    assert [info["resets"] for info in venv.reset_infos] == [1, 1]
+    for _ in range(2):
+        venv.step(np.array([UP, UP]))
+    assert [info["resets"] for info in venv.reset_infos] == [2, 2]
+    assert [info["segment"] for info in venv.reset_infos] == venv.tracker.index.tolist()
+
+
 def test_vector_infos_are_copies_of_the_trackers_state():
     envs = SwirlVectorWrapper(SyncVectorEnv([PointEnv, PointEnv]), line_task())
     _, infos = envs.reset(seed=0)

@@ -387,22 +387,44 @@ class TrackedTask:
         return self.lifter.state_key
 
 
-def _refuse_normalised_states(env: Any, wrapper: str) -> None:
-    """Raise if observation normalisation sits below a SWIRL wrapper: the task's regions live
-    in the raw observation space, so normalised states would be segmented wrongly."""
+def _refuse_below(env: Any, wrapper: str) -> None:
+    """Raise if a wrapper that breaks a SWIRL wrapper sits below it: observation normalisation
+    (the task's regions live in the raw observation space, so normalised states would be
+    segmented wrongly), gymnasium's ``Autoreset`` (it starts a new episode inside a step, which
+    the tracker would take for a step of the old one, in its segment), or another SWIRL
+    wrapper (the observations would be lifted twice, by two trackers)."""
     normalisers = (gym.wrappers.NormalizeObservation, gym.wrappers.vector.NormalizeObservation)
     while isinstance(env, gym.Wrapper | VectorWrapper):
+        name = type(env).__name__
+        if isinstance(env, TrackedTask):
+            raise ValueError(
+                f"{wrapper} over {name}: the env's observations are lifted already (they "
+                "carry a segment); wrap the env with one SWIRL wrapper"
+            )
         if isinstance(env, normalisers):
             raise ValueError(
-                f"{wrapper} must sit below {type(env).__name__}: the task reads raw states. "
-                f"Wrap as {type(env).__name__}({wrapper}(env, task)), not "
-                f"{wrapper}({type(env).__name__}(env), task)"
+                f"{wrapper} must sit below {name}: the task reads raw states. Wrap as "
+                f"{name}({wrapper}(env, task)), not {wrapper}({name}(env), task)"
+            )
+        if isinstance(env, gym.wrappers.Autoreset):
+            raise ValueError(
+                f"{wrapper} must sit below Autoreset, which starts a new episode inside a step: "
+                "the tracker would score its first state as a step of the old episode, in the "
+                f"old segment. Wrap as Autoreset({wrapper}(env, task))"
             )
         env = env.env
     for i, sub in enumerate(getattr(env, "envs", ())):  # a SyncVectorEnv's (an async one's
         try:  # sub-envs live in other processes, out of reach)
-            _refuse_normalised_states(sub, wrapper)
-        except ValueError:
+            _refuse_below(sub, wrapper)
+        except ValueError as exc:
+            if "lifted already" in str(exc):
+                raise ValueError(
+                    f"{wrapper} over a vector env whose sub-env {i} is wrapped with a SWIRL "
+                    "wrapper already: lift the observations once, with the sub-envs' wrapper "
+                    f"or with {wrapper} over plain sub-envs"
+                ) from None
+            if "Autoreset" in str(exc):
+                raise
             on_top = (
                 "SB3's VecNormalize(SwirlVecEnv(venv, task))"
                 if wrapper == "SwirlVecEnv"
@@ -416,8 +438,9 @@ def _refuse_normalised_states(env: Any, wrapper: str) -> None:
 
 
 def _refuse_monitor_below(env: Any) -> None:
-    """Raise if SB3's ``Monitor`` sits below a SwirlWrapper that ends episodes itself: it would
-    never see those episodes end, and record none of them."""
+    """Raise if an episode recorder (SB3's ``Monitor``, gymnasium's
+    ``RecordEpisodeStatistics``) sits below a SwirlWrapper that ends episodes itself: it would
+    never see those episodes end, and record none of them (only the failed ones)."""
     while isinstance(env, gym.Wrapper):
         if any(  # by name: this package does not depend on SB3; subclasses count
             kind.__name__ == "Monitor" and kind.__module__.startswith("stable_baselines3")
@@ -428,6 +451,13 @@ def _refuse_monitor_below(env: Any) -> None:
                 "would never see the episodes it ends: wrap as Monitor(SwirlWrapper(env, task, "
                 "...)), as sb3_swirl.make_swirl_env(env_id, task, wrapper_kwargs=...) does. "
                 "make_vec_env(..., wrapper_class=SwirlWrapper) and the zoo put Monitor first"
+            )
+        if isinstance(env, gym.wrappers.RecordEpisodeStatistics):
+            raise ValueError(
+                "SwirlWrapper(terminate_on_completion=True) must sit below "
+                "RecordEpisodeStatistics, which would never see the episodes it ends (it would "
+                "record only the failed ones): wrap as RecordEpisodeStatistics(SwirlWrapper(env, "
+                "task, ...))"
             )
         env = env.env
 
@@ -539,8 +569,14 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
             terminate_on_completion=terminate_on_completion,
             state_key=state_key,
         )
+        if isinstance(env, VectorEnv) or hasattr(env, "step_async"):  # gymnasium's, SB3's
+            raise ValueError(
+                f"SwirlWrapper wraps one env, got the vector env {type(env).__name__}: wrap it "
+                "with SwirlVectorWrapper (gymnasium's vector envs) or sb3_swirl.SwirlVecEnv "
+                "(SB3's VecEnv), or wrap each sub-env with SwirlWrapper"
+            )
         gym.Wrapper.__init__(self, env)
-        _refuse_normalised_states(env, "SwirlWrapper")
+        _refuse_below(env, "SwirlWrapper")
         self.lifter = Lifter(env.observation_space, task, state_key)
         self.observation_space = self.lifter.observation_space
         self.tracker = SegmentTracker(
@@ -713,7 +749,7 @@ class SwirlVectorWrapper(TrackedTask, VectorWrapper, gym.utils.RecordConstructor
             self, task=task.to_dict(), reward_config=_recorded(reward_config), state_key=state_key
         )
         VectorWrapper.__init__(self, env)
-        _refuse_normalised_states(env, "SwirlVectorWrapper")
+        _refuse_below(env, "SwirlVectorWrapper")
         self.autoreset_mode = AutoresetMode(
             env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
         )
