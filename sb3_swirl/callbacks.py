@@ -129,8 +129,11 @@ class SegmentProgressCallback(BaseCallback):
         if self.n_segments is None:
             task = swirl_task(self.training_env)  # none: success and return only
             self.n_segments = 0 if task is None else task.n_segments
+
+    def _on_training_start(self) -> None:
         # learn() resets the env (a new _last_obs) unless it goes on with reset_num_timesteps=False:
-        # then the running episodes go on too, and a new tracker skips them (it saw no start)
+        # then the running episodes go on too, and a new tracker skips them (it saw no start);
+        # so does one after the steps SwirlDQN takes to label state-only demos, in learn's set-up
         n_envs = self.training_env.num_envs
         going_on = self._final_obs is not None and self.model._last_obs is self._final_obs
         if self._tracker is None or len(self._tracker.returns) != n_envs or not going_on:
@@ -293,6 +296,11 @@ class TaskEvalCallback(EvalCallback):
         super()._init_callback()  # after the checks: it makes the log folders
 
     def _on_training_start(self) -> None:
+        model = self.model
+        if model.num_timesteps and getattr(model, "_labelled_at", None) == model.num_timesteps:
+            # SwirlDQN labelled state-only demos in this learn's set-up, before any step a
+            # callback sees: those random-action episodes are rollouts too
+            self.n_training_episodes += model.inverse_dynamics_episodes_
         if self.eval_at_start and not self.evaluations_timesteps:
             self.evaluate()
 

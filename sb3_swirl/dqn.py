@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import pickle
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar, Literal
 
@@ -197,7 +198,9 @@ class SwirlDQN(DQN):
     infer_actions : {"inverse_dynamics", "none"}
         For demos without actions: label them with an :class:`InverseDynamics` model trained on
         ``inverse_dynamics_steps`` random-action steps in the env (which also go into the
-        replay buffer), or leave them out of BC.
+        replay buffer, and count as the agent's own: in ``num_timesteps``, so within
+        ``learn``'s budget, and in the episodes ``TaskEvalCallback`` reports), or leave them
+        out of BC.
     inverse_dynamics_steps : int
     inverse_dynamics_kwargs : dict, optional
         ``net_arch``, ``epochs``, ``lr``, ``batch_size`` of :class:`InverseDynamics`.
@@ -211,6 +214,8 @@ class SwirlDQN(DQN):
         The env's reward settings (the proxy reward of the replayed demos).
     inverse_dynamics_ : InverseDynamics
         After :meth:`infer_demo_actions`.
+    inverse_dynamics_episodes_ : int
+        Episodes that ended during :meth:`infer_demo_actions`'s steps (0 before).
     """
 
     policy_aliases: ClassVar = DQN.policy_aliases
@@ -267,6 +272,7 @@ class SwirlDQN(DQN):
             ("batch_size", batch_size, 1),
             ("target_update_interval", target_update_interval, 1),
             ("gradient_steps", gradient_steps, -1),  # -1: as many as the env steps
+            ("n_steps", n_steps, 1),
         ):
             check_int(name, value, low=low)
         for name, value in (
@@ -277,7 +283,8 @@ class SwirlDQN(DQN):
             ("exploration_final_eps", exploration_final_eps),
         ):
             check_real(name, value, low=0.0, high=1.0)
-        check_real("max_grad_norm", max_grad_norm, low=0.0, low_open=True)
+        if max_grad_norm != math.inf:  # inf: no clipping, as in DQN
+            check_real("max_grad_norm", max_grad_norm, low=0.0, low_open=True)
         if seed is not None:
             check_int("seed", seed, low=0, high=2**32 - 1)
         self.bc_loss = check_option("bc_loss", bc_loss, ("margin", "cross_entropy"))
@@ -342,6 +349,8 @@ class SwirlDQN(DQN):
             demonstrations = self.env.get_attr("demonstrations", indices=[0])[0]
         self.demonstrations: list[Demonstration] | None = None
         self._bc_done = False
+        self.inverse_dynamics_episodes_ = 0
+        self._labelled_at: int | None = None  # num_timesteps after infer_demo_actions
         self.bc_n_pairs_ = 0
         # The lifted demo pairs of the supervised loss: saved with the model, so that training
         # goes on with the same loss after `load` (the tensors are rebuilt from them).
@@ -692,7 +701,9 @@ class SwirlDQN(DQN):
 
         The model is trained on ``inverse_dynamics_steps`` steps of uniformly random actions in
         the training env; those transitions also go into the replay buffer, so the interaction
-        is not wasted. The fitted model is kept as ``inverse_dynamics_``.
+        is not wasted, and count in ``num_timesteps`` and SB3's episode statistics (the
+        episodes that ended, ``inverse_dynamics_episodes_``, in ``TaskEvalCallback``'s). The
+        fitted model is kept as ``inverse_dynamics_``.
 
         Parameters
         ----------
@@ -731,6 +742,12 @@ class SwirlDQN(DQN):
             s_next.append(after[:, :state_dim])
             acts.append(actions)
             self._store_transition(self.replay_buffer, actions, new_obs, rewards, dones, infos)  # type: ignore[arg-type]
+            self.num_timesteps += self.n_envs  # the agent's own steps, as learn counts them
+            if self.ep_info_buffer is not None:  # None before learn
+                self._update_info_buffer(infos, dones)
+            self._episode_num += int(np.sum(dones))
+            self.inverse_dynamics_episodes_ += int(np.sum(dones))
+        self._labelled_at = self.num_timesteps
         model = InverseDynamics.from_kwargs(self.inverse_dynamics_kwargs, seed=int(seeds[1]))
         model.fit(np.concatenate(s), np.concatenate(s_next), np.concatenate(acts), n_actions)
         self.inverse_dynamics_ = model
@@ -745,7 +762,10 @@ class SwirlDQN(DQN):
         ``infer_actions``), trains ``q_net`` on the demo pairs of every segment with equal
         weight per segment, copies it to ``q_net_target`` and, with ``prefill_replay``, adds
         the demo transitions to the replay buffer, then runs ``pretrain_td_steps`` TD updates
-        on them. Logs ``bc/loss`` and ``bc/accuracy``.
+        on them. Logs ``bc/loss``, ``bc/accuracy`` and ``bc/n_pairs`` (and, after labelling,
+        ``bc/inverse_dynamics_accuracy``: on the labelling steps themselves, not held out);
+        ``train`` logs ``train/demo_loss``, the supervised loss. They are written at the first
+        log dump of ``learn``.
 
         Returns
         -------
@@ -799,6 +819,15 @@ class SwirlDQN(DQN):
                     f"succeed), which task_reward_weight={weight:g} adds to the proxy reward. "
                     "Record the env's rewards, Demonstration(observations, actions, rewards) "
                     "(collect_demos does), or set task_reward_weight to 0",
+                    DemoWarning,
+                    stacklevel=3,
+                )
+            room = self.replay_buffer.buffer_size * self.n_envs  # type: ignore[union-attr]
+            if len(data["actions"]) > room:
+                warnings.warn(
+                    f"the {len(data['actions'])} demo transitions do not fit the replay buffer "
+                    f"(buffer_size={room}): the first are overwritten before any env step, and "
+                    "the rest by the agent's own soon after. Raise buffer_size",
                     DemoWarning,
                     stacklevel=3,
                 )
@@ -1017,6 +1046,35 @@ class SwirlDQN(DQN):
             "_demo",
             "_demo_gen",
         ]
+
+    def predict(
+        self,
+        observation: Any,
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        """DQN's ``predict``; an observation of the env without its SWIRL wrapper (no segment)
+        is refused with how to wrap it, where SB3 would only say that its shape differs."""
+        space, task = self.observation_space, self.task
+        if isinstance(space, spaces.Dict) and isinstance(observation, Mapping):
+            unlifted = SEGMENT_KEY not in observation
+        else:
+            shape = np.shape(observation)
+            unlifted = (
+                isinstance(space, spaces.Box)
+                and len(space.shape) == 1
+                and task is not None
+                and bool(shape)
+                and shape[-1] == space.shape[0] - task.n_indices
+            )
+        if unlifted:
+            raise ValueError(
+                "the observation has no segment: it comes from the env without its SWIRL "
+                "wrapper. Predict (and evaluate) on the env wrapped with the model's task, "
+                "SwirlWrapper(env, model.task) or make_swirl_env(env_id, model.task)"
+            )
+        return super().predict(observation, state, episode_start, deterministic)
 
     def learn(
         self,

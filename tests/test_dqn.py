@@ -588,6 +588,61 @@ def test_inverse_dynamics_labels_state_only_demos():
     assert model.replay_buffer.size() == 1500
 
 
+def test_the_labelling_steps_count_as_the_agents_own(tmp_path):
+    """The random-action steps that label state-only demos are env steps and rollouts: learn's
+    budget, SB3's episode statistics and TaskEvalCallback's episodes count them (they did not:
+    learn(N) took N + inverse_dynamics_steps steps)."""
+    from stable_baselines3.common.monitor import Monitor
+
+    from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
+
+    state_only = [Demonstration(d.observations) for d in point_demos(3)]
+    env = DummyVecEnv([lambda: Monitor(point_env())])
+    model = SwirlDQN(
+        "MlpPolicy", env, demonstrations=state_only, inverse_dynamics_steps=300, seed=0
+    )
+    evaluation = TaskEvalCallback(DummyVecEnv([point_env]), eval_freq=10_000, eval_at_start=True)
+    progress = SegmentProgressCallback()
+    model.learn(400, callback=[evaluation, progress])
+    assert model.num_timesteps == 400 == model.replay_buffer.size()
+    assert model.inverse_dynamics_episodes_ > 0
+    assert evaluation.evaluations_timesteps[0] == 300  # evaluated after the labelling steps
+    assert evaluation.evaluations_episodes[0] == model.inverse_dynamics_episodes_
+    assert evaluation.n_training_episodes == model._episode_num
+    assert len(model.ep_info_buffer) == min(model._episode_num, 100)
+    # the episode running when the labelling ended is not scored: it began unseen
+    assert progress.n_episodes <= model._episode_num - model.inverse_dynamics_episodes_ - 1
+
+
+def test_bad_settings_and_an_unlifted_observation_are_named():
+    """n_steps was unchecked (0 ran as 1, 2.5 failed inside the buffer), max_grad_norm=inf
+    (DQN's "no clipping") was refused, and predicting on the env's own observation gave SB3's
+    shape error."""
+    for bad in (0, -2, 2.5, "3"):
+        with pytest.raises(ValueError, match="n_steps must be an integer"):
+            SwirlDQN("MlpPolicy", point_env(), n_steps=bad)
+    model = SwirlDQN("MlpPolicy", point_env(), max_grad_norm=float("inf"), seed=0)
+    lifted, _ = point_env().reset(seed=0)
+    model.predict(lifted)
+    with pytest.raises(ValueError, match=r"no segment: .*SwirlWrapper\(env, model.task\)"):
+        model.predict(lifted[: -model.task.n_indices])
+    with pytest.raises(ValueError, match="no segment"):
+        model.predict(np.zeros((4, len(lifted) - model.task.n_indices)))
+
+
+def test_demos_that_overflow_the_replay_buffer_are_warned_of():
+    demos = point_demos(3)
+    n = sum(len(d) for d in demos)
+    kwargs = dict(demonstrations=demos, prefill_replay=True, bc_epochs=1, seed=0)
+    model = SwirlDQN("MlpPolicy", point_env(), buffer_size=n - 1, **kwargs)
+    with pytest.warns(DemoWarning, match=f"the {n} demo transitions do not fit the replay"):
+        model.pretrain()
+    model = SwirlDQN("MlpPolicy", point_env(), buffer_size=n, **kwargs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DemoWarning)
+        model.pretrain()
+
+
 def test_inverse_dynamics_refuses_bad_transitions_naming_the_problem():
     from sklearn.exceptions import NotFittedError
 
