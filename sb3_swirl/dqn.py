@@ -24,7 +24,7 @@ from sb3_swirl.buffers import DictNStepReplayBuffer
 from sb3_swirl.demos import (
     Demonstration,
     DemoWarning,
-    as_demonstrations,
+    _as_demonstrations,
     check_demos_fit_spaces,
     check_demos_state_key,
     joined_state_note,
@@ -363,7 +363,8 @@ class SwirlDQN(DQN):
             if demonstrations is not None:  # dict demos: joined in the wrapper's key order
                 dict_obs = isinstance(self.observation_space, spaces.Dict)
                 keys = self._state_keys() if dict_obs else None
-                self.demonstrations = as_demonstrations(demonstrations, state_key=keys)
+                # one demo is enough here: the task is fitted already
+                self.demonstrations = _as_demonstrations(demonstrations, None, keys, minimum=1)
             self._check_demonstrations()
             self._check_relabelling()
         elif _init_setup_model:
@@ -372,7 +373,7 @@ class SwirlDQN(DQN):
                 "`SwirlWrapper(gym.make(env_id), task)` or `make_swirl_env(env_id, task)`"
             )
         elif demonstrations is not None:
-            self.demonstrations = as_demonstrations(demonstrations)
+            self.demonstrations = _as_demonstrations(demonstrations, None, None, minimum=1)
         if _init_setup_model:
             self._setup_model()
 

@@ -630,6 +630,12 @@ def test_bad_settings_and_an_unlifted_observation_are_named():
         model.predict(np.zeros((4, len(lifted) - model.task.n_indices)))
 
 
+def test_one_demo_is_enough_once_the_task_is_fitted():
+    """Fitting needs two demos; cloning into a fitted task's agent does not (it refused one)."""
+    model = SwirlDQN("MlpPolicy", point_env(), demonstrations=point_demos(1), bc_epochs=50, seed=0)
+    assert model.pretrain()["accuracy"] >= 0.9
+
+
 def test_demos_that_overflow_the_replay_buffer_are_warned_of():
     demos = point_demos(3)
     n = sum(len(d) for d in demos)
