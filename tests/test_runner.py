@@ -68,6 +68,15 @@ def interrupts_ignored(seed: int) -> bool:
 
 def test_workers_leave_ctrl_c_to_the_main_process(tmp_path, importable):
     """Ctrl-C reaches the whole process group: workers ignore it, the main process stops."""
+    # as in a terminal: a shell's background job (nohup, `cmd &`) starts with SIGINT ignored
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _check_workers_leave_ctrl_c(tmp_path)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _check_workers_leave_ctrl_c(tmp_path):
     assert run_sweep(interrupts_ignored, [{"seed": 0}, {"seed": 1}], tmp_path / "r.jsonl") == [
         True,
         True,
