@@ -7,6 +7,7 @@ import math
 import os
 import pickle
 import warnings
+from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar, Literal
@@ -582,7 +583,15 @@ class SwirlDQN(DQN):
 
     # ------------------------------------------------------------------ hooks
     def _setup_learn(self, *args: Any, **kwargs: Any) -> tuple[int, Any]:
+        # pretrain() called by hand labelled state-only demos with env steps: the first learn
+        # counts them as it counts its own labelling steps, rather than resetting them away
+        by_hand = self._labelled_at is not None and self._labelled_at == self.num_timesteps > 0
+        kept = (self.num_timesteps, self._episode_num, self.ep_info_buffer, self.ep_success_buffer)
         result = super()._setup_learn(*args, **kwargs)
+        if by_hand and self.num_timesteps == 0:  # reset_num_timesteps=True
+            self.num_timesteps, self._episode_num, self.ep_info_buffer, self.ep_success_buffer = (
+                kept
+            )
         if not self._bc_done and self.demonstrations:
             self.pretrain()
         return result
@@ -651,7 +660,8 @@ class SwirlDQN(DQN):
         The last transition of a demo is terminal (demos end when the task is done) unless the
         demo is ``truncated``; with ``terminate_on_completion`` a demo ends on the step that
         reaches the last region, as the wrapper's episode would. Demos without rewards are
-        taken to end in success: task reward 1 on their last transition.
+        taken to end in success, task reward 1 on their last transition, unless they are
+        ``truncated`` (a time limit ended them: every step pays 0).
         """
         task = self.task
         assert task is not None
@@ -665,7 +675,7 @@ class SwirlDQN(DQN):
         for demo in self.demonstrations or []:
             states, n = demo.observations, len(demo)
             task_rewards = np.zeros(n) if demo.rewards is None else demo.rewards
-            if demo.rewards is None:
+            if demo.rewards is None and not demo.truncated:
                 task_rewards[-1] = 1.0
             tracker = SegmentTracker(task, self.reward_config, None, self.terminate_on_completion)
             tracker.reset(states[0])
@@ -703,7 +713,8 @@ class SwirlDQN(DQN):
         The model is trained on ``inverse_dynamics_steps`` steps of uniformly random actions in
         the training env; those transitions also go into the replay buffer, so the interaction
         is not wasted, and count in ``num_timesteps`` and SB3's episode statistics (the
-        episodes that ended, ``inverse_dynamics_episodes_``, in ``TaskEvalCallback``'s). The
+        episodes that ended, ``inverse_dynamics_episodes_``, in ``TaskEvalCallback``'s), also
+        where ``pretrain`` was called by hand before the first ``learn``. The
         fitted model is kept as ``inverse_dynamics_``.
 
         Parameters
@@ -744,8 +755,10 @@ class SwirlDQN(DQN):
             acts.append(actions)
             self._store_transition(self.replay_buffer, actions, new_obs, rewards, dones, infos)  # type: ignore[arg-type]
             self.num_timesteps += self.n_envs  # the agent's own steps, as learn counts them
-            if self.ep_info_buffer is not None:  # None before learn
-                self._update_info_buffer(infos, dones)
+            if self.ep_info_buffer is None:  # pretrain() by hand, before learn
+                self.ep_info_buffer = deque(maxlen=self._stats_window_size)
+                self.ep_success_buffer = deque(maxlen=self._stats_window_size)
+            self._update_info_buffer(infos, dones)
             self._episode_num += int(np.sum(dones))
             self.inverse_dynamics_episodes_ += int(np.sum(dones))
         self._labelled_at = self.num_timesteps
@@ -816,8 +829,9 @@ class SwirlDQN(DQN):
             if unrewarded and weight != 0:  # TD learning reads the env's reward they lack
                 warnings.warn(
                     f"demos {unrewarded} hold no rewards: in the replay buffer (prefill_replay) "
-                    "their steps pay the env's reward as 0, and 1 on the last step (taken to "
-                    f"succeed), which task_reward_weight={weight:g} adds to the proxy reward. "
+                    "their steps pay the env's reward as 0, and 1 on the last step of a demo not "
+                    f"truncated (taken to succeed), which task_reward_weight={weight:g} adds to "
+                    "the proxy reward. "
                     "Record the env's rewards, Demonstration(observations, actions, rewards) "
                     "(collect_demos does), or set task_reward_weight to 0",
                     DemoWarning,

@@ -467,6 +467,17 @@ def test_prefill_warns_of_demos_without_rewards_where_the_env_reward_counts():
             model.pretrain()
 
 
+def test_demos_without_rewards_succeed_at_the_end_unless_truncated():
+    """A rewardless demo is taken to end in success (task reward 1 on its last step); one
+    that a time limit cut short pays 0 on every step."""
+    demos = point_demos(2)
+    cut = Demonstration(demos[1].observations, demos[1].actions, truncated=True)
+    model = SwirlDQN("MlpPolicy", point_env(), demonstrations=[demos[0], cut], seed=0)
+    done, truncated = model._demo_transitions()
+    assert done["task_reward"][-1] == 1.0 and done["task_reward"][:-1].sum() == 0
+    assert truncated["task_reward"].sum() == 0
+
+
 @pytest.mark.parametrize("handle_timeout_termination", [True, False])
 def test_prefill_lays_demos_out_in_order_for_n_step_returns(handle_timeout_termination):
     """With 3 envs and 3-step returns, each buffer column reads the demos in order, and a
@@ -588,10 +599,11 @@ def test_inverse_dynamics_labels_state_only_demos():
     assert model.replay_buffer.size() == 1500
 
 
-def test_the_labelling_steps_count_as_the_agents_own(tmp_path):
+@pytest.mark.parametrize("by_hand", [False, True])
+def test_the_labelling_steps_count_as_the_agents_own(by_hand):
     """The random-action steps that label state-only demos are env steps and rollouts: learn's
     budget, SB3's episode statistics and TaskEvalCallback's episodes count them (they did not:
-    learn(N) took N + inverse_dynamics_steps steps)."""
+    learn(N) took N + inverse_dynamics_steps steps), also after pretrain() called by hand."""
     from stable_baselines3.common.monitor import Monitor
 
     from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
@@ -603,6 +615,8 @@ def test_the_labelling_steps_count_as_the_agents_own(tmp_path):
     )
     evaluation = TaskEvalCallback(DummyVecEnv([point_env]), eval_freq=10_000, eval_at_start=True)
     progress = SegmentProgressCallback()
+    if by_hand:
+        model.pretrain()
     model.learn(400, callback=[evaluation, progress])
     assert model.num_timesteps == 400 == model.replay_buffer.size()
     assert model.inverse_dynamics_episodes_ > 0
