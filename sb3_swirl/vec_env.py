@@ -156,6 +156,8 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
 
     def reset(self) -> VecEnvObs:
         obs = self.venv.reset()
+        for info in self.venv.reset_infos:
+            self._warn_overwritten(info)
         self.tracker.reset(self.lifter.state(obs))
         self.reset_infos = [
             {**info, SEGMENT_KEY: index}
@@ -165,6 +167,8 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
 
     def step_wait(self) -> VecEnvStepReturn:
         obs, task_rewards, dones, infos = self.venv.step_wait()
+        for info in infos:
+            self._warn_overwritten(info)
         done = np.flatnonzero(dones).tolist()
         final = [infos[i]["terminal_observation"] for i in done]
         # SB3 marks a time-limit end with TimeLimit.truncated; every other done is a termination.

@@ -146,6 +146,41 @@ def test_rewards_indices_bonus_and_info_on_a_line():
         assert not terminated and not truncated
 
 
+class _SegmentInfoEnv(PointEnv):
+    """An env of its own that reports a ``segment`` in its step infos."""
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = super().step(action)
+        return obs, reward, terminated, truncated, {**info, "segment": "the env's own"}
+
+
+@pytest.mark.parametrize("kind", ["wrapper", "vector", "sb3"])
+def test_an_env_info_key_the_wrapper_writes_is_warned_of_once(kind):
+    """The env's own info["segment"] is overwritten by the wrapper's: said once, not silently;
+    an env without such keys gets no warning."""
+
+    def run(make_env):
+        if kind == "wrapper":
+            env = SwirlWrapper(make_env(), line_task())
+            env.reset(seed=0)
+            return [env.step(UP)[4]["segment"] for _ in range(3)]
+        if kind == "vector":
+            env = SwirlVectorWrapper(SyncVectorEnv([make_env] * 2), line_task())
+            env.reset(seed=0)
+            return [env.step(np.full(2, UP))[4]["segment"][0] for _ in range(3)]
+        env = SwirlVecEnv(DummyVecEnv([make_env] * 2), line_task())
+        env.reset()
+        return [env.step(np.full(2, UP))[3][0]["segment"] for _ in range(3)]
+
+    with pytest.warns(UserWarning, match=r"holds \['segment'\], which Swirl\w+ writes") as caught:
+        segments = run(_SegmentInfoEnv)
+    assert len([w for w in caught if "holds ['segment']" in str(w.message)]) == 1
+    assert segments == [0, 1, 1]  # the wrapper's index
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        run(PointEnv)
+
+
 def test_regions_must_be_reached_in_order():
     env = SwirlWrapper(PointEnv(), line_task())
     env.reset(options={"start": [2.0]})  # starts in region 1, which is not next

@@ -386,6 +386,20 @@ class TrackedTask:
         """The observation key(s) the task state is read from (``None``: Box observations)."""
         return self.lifter.state_key
 
+    def _warn_overwritten(self, info: Mapping[str, Any]) -> None:
+        """Warn, once, where the env's own info holds a key the wrapper writes."""
+        if getattr(self, "_warned_overwritten", False):
+            return
+        taken = [k for k in (SEGMENT_KEY, TASK_REWARD_KEY, SEGMENT_REWARD_KEY) if k in info]
+        if taken:
+            self._warned_overwritten = True
+            warnings.warn(
+                f"the env's info holds {taken}, which {type(self).__name__} writes (the segment "
+                "index, the env's reward, the segment reward): the env's values are overwritten. "
+                "Rename those keys in the env to keep them",
+                stacklevel=3,
+            )
+
 
 def _refuse_below(env: Any, wrapper: str) -> None:
     """Raise if a wrapper that breaks a SWIRL wrapper sits below it: observation normalisation
@@ -498,7 +512,9 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
     key (Dict observations); the reward is the segment reward as the
     :class:`~swirl_wrappers.RewardConfig` says (default: the task's own, the paper's
     ``R_i(s')`` of the segment ``i`` in force before the step). See
-    :mod:`swirl_wrappers.tracker` for the exact timing.
+    :mod:`swirl_wrappers.tracker` for the exact timing. The infos get ``"segment"``, and the
+    step infos ``"task_reward"`` (the env's own reward) and ``"segment_reward"``; an env's own
+    info keys of these names are overwritten, with a warning the first time.
 
     Parameters
     ----------
@@ -617,6 +633,7 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
+        self._warn_overwritten(info)
         self.tracker.reset(self.lifter.state(obs))
         segment = int(self.tracker.index)
         info[SEGMENT_KEY] = segment
@@ -624,6 +641,7 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, task_reward, terminated, truncated, info = self.env.step(action)
+        self._warn_overwritten(info)
         reward, terminated = self.tracker.step(self.lifter.state(obs), task_reward, terminated)
         reward, segment = float(reward), int(self.tracker.index)
         info[SEGMENT_KEY] = segment
@@ -768,6 +786,7 @@ class SwirlVectorWrapper(TrackedTask, VectorWrapper, gym.utils.RecordConstructor
         mask = None if options is None else options.get("reset_mask")  # before env.reset pops it
         mask = np.ones(self.num_envs, dtype=bool) if mask is None else np.asarray(mask, bool)
         obs, infos = self.env.reset(seed=seed, options=options)
+        self._warn_overwritten(infos)
         self.tracker.reset(self.lifter.state(obs), mask)
         self._autoreset = self._autoreset & ~mask
         infos[SEGMENT_KEY] = self.tracker.index.copy()  # not the tracker's own array
@@ -776,6 +795,7 @@ class SwirlVectorWrapper(TrackedTask, VectorWrapper, gym.utils.RecordConstructor
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         obs, task_rewards, terminations, truncations, infos = self.env.step(actions)
+        self._warn_overwritten(infos)
         done = terminations | truncations
         restart = final_states = None
         stepped = np.ones(self.num_envs, dtype=bool)  # rows whose info is a step's
