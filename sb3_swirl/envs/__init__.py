@@ -61,8 +61,8 @@ register(
     max_episode_steps=100,
 )
 
-# gymnasium-robotics' Fetch tasks in 2 cm end-effector steps; the horizons are at least 1.7x
-# the longest of 300 supervised episodes (18, 88 and 63 steps)
+# gymnasium-robotics' Fetch tasks in 2 cm end-effector steps; the horizons are at least 2x
+# the longest of 300 supervised episodes (18, 73 and 63 steps)
 for _task, _steps in (("Reach", 50), ("Push", 150), ("PickAndPlace", 150)):
     register(
         id=f"sb3_swirl/Fetch{_task}Discrete-v0",
