@@ -156,8 +156,7 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
 
     def reset(self) -> VecEnvObs:
         obs = self.venv.reset()
-        for info in self.venv.reset_infos:
-            self._warn_overwritten(info)
+        self._warn_overwritten(*self.venv.reset_infos)
         self.tracker.reset(self.lifter.state(obs))
         self.reset_infos = [
             {**info, SEGMENT_KEY: index}
@@ -167,8 +166,7 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
 
     def step_wait(self) -> VecEnvStepReturn:
         obs, task_rewards, dones, infos = self.venv.step_wait()
-        for info in infos:
-            self._warn_overwritten(info)
+        self._warn_overwritten(*infos)
         done = np.flatnonzero(dones).tolist()
         final = [infos[i]["terminal_observation"] for i in done]
         # SB3 marks a time-limit end with TimeLimit.truncated; every other done is a termination.

@@ -368,6 +368,7 @@ class TrackedTask:
     attributes every SWIRL wrapper exposes."""
 
     tracker: SegmentTracker
+    _warned_overwritten: bool = False  # _warn_overwritten's warning, once per wrapper
 
     @property
     def task(self) -> TaskModel:
@@ -386,11 +387,12 @@ class TrackedTask:
         """The observation key(s) the task state is read from (``None``: Box observations)."""
         return self.lifter.state_key
 
-    def _warn_overwritten(self, info: Mapping[str, Any]) -> None:
-        """Warn, once, where the env's own info holds a key the wrapper writes."""
-        if getattr(self, "_warned_overwritten", False):
+    def _warn_overwritten(self, *infos: Mapping[str, Any]) -> None:
+        """Warn, once, where the env's own infos hold a key the wrapper writes."""
+        if self._warned_overwritten:
             return
-        taken = [k for k in (SEGMENT_KEY, TASK_REWARD_KEY, SEGMENT_REWARD_KEY) if k in info]
+        keys = (SEGMENT_KEY, TASK_REWARD_KEY, SEGMENT_REWARD_KEY)
+        taken = sorted({k for info in infos for k in keys if k in info}, key=keys.index)
         if taken:
             self._warned_overwritten = True
             warnings.warn(
