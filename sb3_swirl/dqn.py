@@ -214,7 +214,8 @@ class SwirlDQN(DQN):
     reward_config : RewardConfig
         The env's reward settings (the proxy reward of the replayed demos).
     inverse_dynamics_ : InverseDynamics
-        After :meth:`infer_demo_actions`.
+        After :meth:`infer_demo_actions`; saved with the model, so a loaded one labels more
+        state-only demos as the trained one did.
     inverse_dynamics_episodes_ : int
         Episodes that ended during :meth:`infer_demo_actions`'s steps (0 before).
     """
@@ -1057,7 +1058,6 @@ class SwirlDQN(DQN):
             *super()._excluded_save_params(),
             *(["demonstrations"] if self._bc_done else []),
             "task",
-            "inverse_dynamics_",
             "_demo",
             "_demo_gen",
         ]

@@ -581,7 +581,7 @@ def test_potential_shaping_with_another_gamma_warns():
         SwirlDQN("MlpPolicy", point_env(reward_config={"mode": "potential", "gamma": 0.9}))
 
 
-def test_inverse_dynamics_labels_state_only_demos():
+def test_inverse_dynamics_labels_state_only_demos(tmp_path):
     demos = point_demos(3)
     state_only = [Demonstration(d.observations) for d in demos]
     model = SwirlDQN(
@@ -597,6 +597,14 @@ def test_inverse_dynamics_labels_state_only_demos():
     assert agreement >= 0.9
     # the random-action steps were kept for Q-learning
     assert model.replay_buffer.size() == 1500
+    # the labeller is saved with the model (it was dropped): a loaded one labels alike
+    model.save(tmp_path / "model.zip")
+    loaded = SwirlDQN.load(tmp_path / "model.zip")
+    for d in state_only:
+        s, s_next = d.observations[:-1], d.observations[1:]
+        np.testing.assert_array_equal(
+            loaded.inverse_dynamics_.predict(s, s_next), model.inverse_dynamics_.predict(s, s_next)
+        )
 
 
 @pytest.mark.parametrize("by_hand", [False, True])
