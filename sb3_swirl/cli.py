@@ -360,13 +360,6 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     from sb3_swirl.experiments import EXPERIMENTS, reproduce_all
 
     _writable_folder(Path(args.out))
-    swept = args.name in EXPERIMENTS or args.name == "all"
-    sweep = {"backend": args.backend, "jobs": args.jobs or 2, "address": args.address}
-    if not swept and (args.resume or args.backend != "joblib" or args.address or args.jobs):
-        raise ValueError(
-            f"{args.name} is not a sweep (its runs go one after the other): --jobs, --backend, "
-            "--address, --resume do not apply"
-        )
     if args.address and args.backend != "ray":
         raise ValueError("--address is a Ray cluster's: add --backend ray")
     if args.name != "fig9" and args.repeats is not None:
@@ -374,17 +367,23 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     for flag in ("panels", "methods"):
         if getattr(args, flag) and args.name not in EXPERIMENTS:
             raise ValueError(f"--{flag} applies to the figures, not to {args.name}")
-    common = {"quick": args.quick, "out_dir": args.out, "progress": not args.quiet}
+    common = {
+        "quick": args.quick,
+        "out_dir": args.out,
+        "progress": not args.quiet,
+        "backend": args.backend,
+        "jobs": args.jobs,
+        "address": args.address,
+        "resume": args.resume,
+    }
     if args.name == "all":
         if args.seeds:
             raise ValueError("--seeds applies to one table or figure, not to all")
-        reproduce_all(**common, **sweep, resume=args.resume)
-    elif swept:
+        reproduce_all(**common)
+    elif args.name in EXPERIMENTS:
         REPRODUCTIONS[args.name](
             **common,
-            **sweep,
             seeds=args.seeds,
-            resume=args.resume,
             panels=args.panels,
             methods=args.methods,
             repeats=args.repeats,
@@ -548,7 +547,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=_seed, nargs="+", default=None, help="override the seeds")
     p.add_argument("--out", default="results", help="output folder (default results/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    p.add_argument("--jobs", type=_positive, help="runs at once (figures; default 2)")
+    p.add_argument("--jobs", type=_positive, default=2, help="runs at once (default 2)")
     p.add_argument(
         "--backend",
         default="joblib",

@@ -15,6 +15,8 @@ import sys
 import textwrap
 import time
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from importlib.resources import files
@@ -49,16 +51,65 @@ def _output_name(stem: str, suffix: str, quick: bool) -> str:
     return f"{stem}{'_quick' if quick else ''}{suffix}"
 
 
-def _table_output(out_dir: str | Path, name: str, quick: bool) -> Path:
-    """Where table ``name`` writes its results, checked before any work: a table runs whole
-    (it is not a sweep to resume), so one written before is an error, not overwritten."""
-    path = Path(out_dir) / name / _output_name("results", ".json", quick)
-    if path.exists():
-        raise ValueError(
-            f"{path} exists: {name} is not overwritten; move it away or choose another output"
+@contextmanager
+def _kept_warnings() -> Iterator[list[str]]:
+    """Warnings raised inside, kept (once each, deprecations left out) in the list it yields
+    instead of printed: a sweep's worker processes would interleave them with its progress
+    bar. The record of the run carries them."""
+    kept: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield kept
+    kept.extend(
+        dict.fromkeys(
+            f"{w.category.__name__}: {w.message}"
+            for w in caught
+            if not issubclass(w.category, DeprecationWarning)
         )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return path
+    )
+
+
+def _table_sweep(
+    name: str,
+    function: Any,
+    work: list[dict[str, Any]],
+    quick: bool,
+    out_dir: str | Path,
+    backend: str,
+    jobs: int,
+    address: str | None,
+    resume: bool,
+    progress: bool,
+) -> tuple[list[dict[str, Any]], Path]:
+    """Table ``name``'s jobs through :func:`sb3_swirl.runner.run_sweep` into
+    ``out_dir/name/runs.jsonl``; their records, and where the table's results go. Results
+    written without a runs file beside them (an older version's) are an error, not
+    overwritten."""
+    from sb3_swirl.runner import run_sweep
+
+    out = Path(out_dir) / name
+    path = out / _output_name("results", ".json", quick)
+    runs_file = out / _output_name("runs", ".jsonl", quick)
+    if path.exists() and not runs_file.exists():
+        raise ValueError(
+            f"{path} exists without its runs ({runs_file.name}), so --resume cannot go on from "
+            "it: it is not overwritten; move it away or choose another output"
+        )
+    records = run_sweep(
+        function,
+        work,
+        runs_file,
+        backend=backend,
+        n_jobs=jobs,
+        address=address,
+        resume=resume,
+        progress=progress,
+        stamp=_settings_stamp(),
+    )
+    texts = [text for record in records for text in record["warnings"]]
+    for text in dict.fromkeys(texts):  # a seed's fit warns in each of its runs: said once
+        console.print(f"warning ({texts.count(text)} of {len(records)} runs): {text}")
+    return records, path
 
 
 @dataclass(frozen=True)
@@ -731,12 +782,117 @@ def _score_episodes(episodes: list[list[dict[str, Any]]]) -> dict[str, float]:
     }
 
 
+#: Table 1's jobs per seed: the learners (long) and the methods scored without training
+_TABLE1_GROUPS = {
+    "rl": ("rl",),
+    "swirl": ("swirl",),
+    "swirl_no_bc": ("swirl_no_bc",),
+    "clones": ("bc", "segmented_bc", "supervisor"),
+}
+#: Table 1's learners: (algorithm, whether it learns from the demos, hyperparameter overrides)
+_TABLE1_LEARNERS: dict[str, tuple[str, bool, dict[str, Any]]] = {
+    "rl": ("dqn", False, {}),
+    "swirl": ("swirl_dqn", True, {}),
+    "swirl_no_bc": (
+        "swirl_dqn",
+        False,
+        {
+            "prefill_replay": False,
+            "pretrain_td_steps": 0,
+            "demo_loss_coef": 0.0,
+            "exploration_initial_eps": 1.0,
+        },
+    ),
+}
+
+
+def table1_run(seed: int, group: str, steps: int, n_eval: int) -> dict[str, Any]:
+    """One job of :func:`reproduce_table1`: seed ``seed``'s 15 supervisor demos and SWIRL's
+    fit, then the methods of ``group`` scored on ``n_eval`` greedy episodes: ``"clones"``
+    (BC on the raw and on the lifted observation, and the supervisor; no training) or one
+    learner (``"rl"``, ``"swirl"``, ``"swirl_no_bc"``) trained for ``steps`` env steps.
+    Module-level with JSON arguments and result: sweeps
+    (:func:`sb3_swirl.runner.run_sweep`) run it in other processes.
+
+    Returns
+    -------
+    dict
+        ``"methods"`` (method -> its scores: value, success and grasp rates, and the
+        learner's ``wall_time_s``), ``"n_segments"`` (the fit's; None for ``"rl"``, which
+        learns without demos) and ``"warnings"`` (of the fit and the training).
+    """
+    import torch
+
+    from sb3_swirl.baselines import BCPolicy, lifted_demos
+    from sb3_swirl.fitting import fit_task
+    from sb3_swirl.supervisors import TensioningSupervisor, collect_demos
+    from swirl_wrappers import SwirlWrapper
+
+    check_option("group", group, tuple(_TABLE1_GROUPS))
+    torch.set_num_threads(1)  # tiny networks: extra threads only contend for the cores
+    base = PRESETS["tensioning"]
+    # train_and_evaluate's own evaluation runs once, at the end, on one episode: every method
+    # is scored below on the same episodes
+    preset = replace(base, eval_freq=steps, n_eval_episodes=1)
+    eval_seeds = [20_000 + 100 * seed + i for i in range(n_eval)]
+    methods: dict[str, dict[str, Any]] = {}
+    task = None
+    with _kept_warnings() as kept:
+        if group != "rl":  # pure exploration learns from no demos and no fit
+            demos = collect_demos(base.env_id, base.n_demos, seed=seed, progress=False)
+            task = fit_task(demos, random_state=seed, **base.fit_kwargs)
+        if group == "clones":
+            env = gym.make(base.env_id)
+            lifted_env = SwirlWrapper(gym.make(base.env_id), task)
+            observations = np.concatenate([d.observations[:-1] for d in demos])
+            actions = np.concatenate([d.actions for d in demos])
+            lifted = lifted_demos(demos, task, env.observation_space)
+            clones = {
+                "bc": (BCPolicy(random_state=seed).fit(observations, actions), env),
+                "segmented_bc": (BCPolicy(random_state=seed).fit(*lifted), lifted_env),
+            }
+            for name, (policy, score_env) in clones.items():
+                methods[name] = _score_policy(policy, score_env, eval_seeds)
+            episodes = [
+                greedy_infos(_OneEpisode(TensioningSupervisor(env.unwrapped, seed=s)), env, s)
+                for s in eval_seeds
+            ]
+            methods["supervisor"] = _score_episodes(episodes)
+            env.close()
+            lifted_env.close()
+        else:
+            algo, with_demos, overrides = _TABLE1_LEARNERS[group]
+            run = train_and_evaluate(
+                algo,
+                preset,
+                task=task,
+                demos=demos if with_demos else None,
+                total_timesteps=steps,
+                seed=seed,
+                progress=False,
+                hyperparams=load_hyperparams(algo, base.env_id) | overrides,
+                keep_model=True,
+            )
+            scored = _score_policy(run["model"], run["eval_env"], eval_seeds)
+            methods[group] = {"wall_time_s": run["wall_time_s"]} | scored
+            run["eval_env"].close()
+    return {
+        "methods": methods,
+        "n_segments": None if task is None else task.n_segments,
+        "warnings": kept,
+    }
+
+
 def reproduce_table1(
     *,
     quick: bool = False,
     seeds: list[int] | None = None,
     out_dir: str | Path = "results",
     progress: bool = True,
+    backend: str = "joblib",
+    jobs: int = 2,
+    address: str | None = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """The paper's Table 1 on ``DVRKTensioning-v0``: five methods, 15 demos, 100 rollouts.
 
@@ -746,8 +902,13 @@ def reproduce_table1(
     same number of steps; and the supervisor that made the demos (``supervisor``, seeded with
     each episode's seed), the demonstrator's own score. Every method is scored on the same
     greedy evaluation episodes by the disparity value (minus the disparity in cm² summed over
-    the 100 steps; the paper's units are not given, so only ratios compare). Writes
-    ``out_dir/table1/results.json`` (``results_quick.json`` with ``quick``).
+    the 100 steps; the paper's units are not given, so only ratios compare).
+
+    A sweep of four jobs per seed (:func:`table1_run`: the three learners, and the rest) through
+    :func:`sb3_swirl.runner.run_sweep`, as the figures are: each record lands in
+    ``out_dir/table1/runs.jsonl`` as it finishes (``resume`` goes on from it). Then writes
+    ``out_dir/table1/results.json``; with ``quick``, ``runs_quick.jsonl`` and
+    ``results_quick.json``.
 
     Parameters
     ----------
@@ -756,79 +917,28 @@ def reproduce_table1(
         rollouts and 10 evaluation episodes.
     seeds : list of int, optional
         Override the seeds.
+    backend, jobs, address, resume : see :func:`sb3_swirl.runner.run_sweep`
     """
-    from sb3_swirl.baselines import BCPolicy, lifted_demos
-    from sb3_swirl.fitting import fit_task
-    from sb3_swirl.supervisors import TensioningSupervisor, collect_demos
-    from swirl_wrappers import SwirlWrapper
-
     base = PRESETS["tensioning"]
     steps = 2_000 if quick else base.total_timesteps
     n_eval = 3 if quick else 10
     seeds = _checked_seeds(([0] if quick else [0, 1, 2]) if seeds is None else seeds)
-    # train_and_evaluate's own evaluation runs once, at the end, on one episode: every method
-    # is scored below on the same episodes
-    preset = replace(base, eval_freq=steps, n_eval_episodes=1)
-    path = _table_output(out_dir, "table1", quick)
     console.rule(f"[bold]Table 1: gauze tensioning, {len(seeds)} seed(s), {steps} steps")
-
+    work = [
+        {"seed": seed, "group": group, "steps": steps, "n_eval": n_eval}
+        for seed in seeds
+        for group in _TABLE1_GROUPS
+    ]
+    records, path = _table_sweep(
+        "table1", table1_run, work, quick, out_dir, backend, jobs, address, resume, progress
+    )
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name in _TABLE1_LABELS}
     segments = []
-    for seed in seeds:
-        eval_seeds = [20_000 + 100 * seed + i for i in range(n_eval)]
-        demos = collect_demos(base.env_id, base.n_demos, seed=seed, progress=progress)
-        task = fit_task(demos, random_state=seed, **base.fit_kwargs)
-        segments.append(task.n_segments)
-        env = gym.make(base.env_id)
-        lifted_env = SwirlWrapper(gym.make(base.env_id), task)
-        observations = np.concatenate([d.observations[:-1] for d in demos])
-        actions = np.concatenate([d.actions for d in demos])
-        clones = {
-            "bc": (BCPolicy(random_state=seed).fit(observations, actions), env),
-            "segmented_bc": (
-                BCPolicy(random_state=seed).fit(*lifted_demos(demos, task, env.observation_space)),
-                lifted_env,
-            ),
-        }
-        for name, (policy, score_env) in clones.items():
-            runs[name].append({"seed": seed} | _score_policy(policy, score_env, eval_seeds))
-        episodes = [
-            greedy_infos(_OneEpisode(TensioningSupervisor(env.unwrapped, seed=s)), env, s)
-            for s in eval_seeds
-        ]
-        runs["supervisor"].append({"seed": seed} | _score_episodes(episodes))
-        learners = {
-            "rl": ("dqn", None, None),
-            "swirl": ("swirl_dqn", demos, None),
-            "swirl_no_bc": (
-                "swirl_dqn",
-                None,
-                {
-                    "prefill_replay": False,
-                    "pretrain_td_steps": 0,
-                    "demo_loss_coef": 0.0,
-                    "exploration_initial_eps": 1.0,
-                },
-            ),
-        }
-        for name, (algo, algo_demos, overrides) in learners.items():
-            hyperparams = load_hyperparams(algo, base.env_id) | (overrides or {})
-            console.print(f"seed {seed}: training {name} for {steps} steps")
-            run = train_and_evaluate(
-                algo,
-                preset,
-                task=task,
-                demos=algo_demos,
-                total_timesteps=steps,
-                seed=seed,
-                progress=progress,
-                hyperparams=hyperparams,
-                keep_model=True,
-            )
-            scored = _score_policy(run["model"], run["eval_env"], eval_seeds)
-            runs[name].append({"seed": seed, "wall_time_s": run["wall_time_s"]} | scored)
-        env.close()
-        lifted_env.close()
+    for job, record in zip(work, records, strict=True):
+        if job["group"] == "clones":
+            segments.append(record["n_segments"])
+        for name, scores in record["methods"].items():
+            runs[name].append({"seed": job["seed"]} | scores)
 
     summary = {}
     for name, per_seed in runs.items():
@@ -925,12 +1035,68 @@ def _score_cuts(policy: Any, env: gym.Env, seeds: list[int]) -> dict[str, Any]:
     }
 
 
+def table2_run(seed: int, radius: float | None, episodes: int, n_eval: int) -> dict[str, Any]:
+    """One job of :func:`reproduce_table2`: seed ``seed``'s 5 straight-line demos, SWIRL's fit
+    and the SVM clone, then SwirlDQN with ``episodes`` episodes of exploration on the line of
+    ``radius`` (cm; None: straight), and both policies scored by :func:`_score_cuts` on
+    ``n_eval`` greedy episodes. Module-level with JSON arguments and result, for
+    :func:`sb3_swirl.runner.run_sweep`.
+
+    Returns
+    -------
+    dict
+        ``"svm"`` and ``"swirl"`` (their :func:`_score_cuts`), ``"n_segments"`` (the fit's)
+        and ``"warnings"`` (of the fit and the training).
+    """
+    import torch
+
+    from sb3_swirl.baselines import BCPolicy
+    from sb3_swirl.fitting import fit_task
+    from sb3_swirl.supervisors import collect_demos
+
+    torch.set_num_threads(1)  # tiny networks: extra threads only contend for the cores
+    preset = PRESETS["linecutting"]
+    eval_seeds = [30_000 + 100 * seed + i for i in range(n_eval)]
+    with _kept_warnings() as kept:
+        demos = collect_demos(
+            preset.env_id, preset.n_demos, seed=seed, progress=False, **preset.demo_env_kwargs
+        )
+        task = fit_task(demos, random_state=seed, **preset.fit_kwargs)
+        observations = np.concatenate([d.observations[:-1] for d in demos])
+        actions = np.concatenate([d.actions for d in demos])
+        svm = BCPolicy("svm", random_state=seed).fit(observations, actions)
+        env = gym.make(preset.env_id, radius=radius)
+        swirl = train_and_evaluate(
+            "swirl_dqn",
+            replace(preset, eval_freq=10**9, n_eval_episodes=1),
+            task=task,
+            demos=demos,
+            total_timesteps=150 * episodes,
+            seed=seed,
+            progress=False,
+            keep_model=True,
+            env_kwargs={"radius": radius},
+            max_episodes=episodes,
+        )
+        scores = {
+            "svm": _score_cuts(svm, env, eval_seeds),
+            "swirl": _score_cuts(swirl["model"], swirl["eval_env"], eval_seeds),
+        }
+        env.close()
+        swirl["eval_env"].close()
+    return {"n_segments": task.n_segments} | scores | {"warnings": kept}
+
+
 def reproduce_table2(
     *,
     quick: bool = False,
     seeds: list[int] | None = None,
     out_dir: str | Path = "results",
     progress: bool = True,
+    backend: str = "joblib",
+    jobs: int = 2,
+    address: str | None = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """The paper's Table 2 on ``DVRKLineCutting-v0``: SWIRL vs an SVM clone on curved lines.
 
@@ -939,8 +1105,13 @@ def reproduce_table2(
     every test line (straight, and arcs of radius 4.0 to 1.5 cm) SwirlDQN from the demos with
     25 episodes of exploration on that line, and both policies scored on the same greedy
     episodes: cut success (start within 1 cm of the line's start, never more than 1 cm off it),
-    position and tracking errors (cm, over the episodes that began a cut). Writes
-    ``out_dir/table2/results.json`` (``results_quick.json`` with ``quick``).
+    position and tracking errors (cm, over the episodes that began a cut).
+
+    A sweep of one job per seed and line (:func:`table2_run`) through
+    :func:`sb3_swirl.runner.run_sweep`, as the figures are: each record lands in
+    ``out_dir/table2/runs.jsonl`` as it finishes (``resume`` goes on from it). Then writes
+    ``out_dir/table2/results.json``; with ``quick``, ``runs_quick.jsonl`` and
+    ``results_quick.json``.
 
     Parameters
     ----------
@@ -949,56 +1120,28 @@ def reproduce_table2(
         evaluation episodes, instead of seeds 0-2, the seven lines, 25 and 15.
     seeds : list of int, optional
         Override the seeds.
+    backend, jobs, address, resume : see :func:`sb3_swirl.runner.run_sweep`
     """
-    from sb3_swirl.baselines import BCPolicy
-    from sb3_swirl.fitting import fit_task
-    from sb3_swirl.supervisors import collect_demos
-
     preset = PRESETS["linecutting"]
     radii = [None, 3.0, 1.5] if quick else list(PAPER_TABLE2)
     episodes, n_eval = (10, 5) if quick else (25, 15)
     seeds = _checked_seeds(([0] if quick else [0, 1, 2]) if seeds is None else seeds)
-    path = _table_output(out_dir, "table2", quick)
     console.rule(
         f"[bold]Table 2: line cutting, {len(seeds)} seed(s), {episodes} episodes of exploration"
     )
-
-    runs: list[dict[str, Any]] = []
-    for seed in seeds:
-        demos = collect_demos(
-            preset.env_id, preset.n_demos, seed=seed, progress=progress, **preset.demo_env_kwargs
-        )
-        task = fit_task(demos, random_state=seed, **preset.fit_kwargs)
-        observations = np.concatenate([d.observations[:-1] for d in demos])
-        actions = np.concatenate([d.actions for d in demos])
-        svm = BCPolicy("svm", random_state=seed).fit(observations, actions)
-        eval_seeds = [30_000 + 100 * seed + i for i in range(n_eval)]
-        for radius in radii:
-            line = "straight" if radius is None else f"r = {radius} cm"
-            console.print(f"seed {seed}, {line}: SwirlDQN, {episodes} episodes of exploration")
-            env = gym.make(preset.env_id, radius=radius)
-            swirl = train_and_evaluate(
-                "swirl_dqn",
-                replace(preset, eval_freq=10**9, n_eval_episodes=1),
-                task=task,
-                demos=demos,
-                total_timesteps=150 * episodes,
-                seed=seed,
-                progress=progress,
-                keep_model=True,
-                env_kwargs={"radius": radius},
-                max_episodes=episodes,
-            )
-            runs.append(
-                {
-                    "seed": seed,
-                    "radius_cm": radius,
-                    "n_segments": task.n_segments,
-                    "svm": _score_cuts(svm, env, eval_seeds),
-                    "swirl": _score_cuts(swirl["model"], swirl["eval_env"], eval_seeds),
-                }
-            )
-            env.close()
+    work = [
+        {"seed": seed, "radius": radius, "episodes": episodes, "n_eval": n_eval}
+        for seed in seeds
+        for radius in radii
+    ]
+    records, path = _table_sweep(
+        "table2", table2_run, work, quick, out_dir, backend, jobs, address, resume, progress
+    )
+    runs = [
+        {"seed": job["seed"], "radius_cm": job["radius"], "n_segments": record["n_segments"]}
+        | {method: record[method] for method in ("svm", "swirl")}
+        for job, record in zip(work, records, strict=True)
+    ]
 
     def mean(values: list[float | None]) -> float | None:
         known = [v for v in values if v is not None]
@@ -1107,10 +1250,8 @@ def method_run(
     pure = method in ("dqn", "dqn_rbf", "dqn_her")
     n = chosen.n_demos if n_demos is None else n_demos
     demo_env = chosen.env_id if demo_env_id is None else demo_env_id
-    # a sweep runs hundreds of fits in worker processes: keep their warnings in the record
-    # (the summary counts them) instead of interleaving them with the progress bar
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    # a sweep runs hundreds of fits in worker processes: the record keeps their warnings
+    with _kept_warnings() as kept:
         demos = (
             []
             if pure
@@ -1129,13 +1270,7 @@ def method_run(
             max_episodes=max_episodes,
         )
     record.pop("hyperparams", None)  # classes in policy_kwargs are not JSON
-    record["warnings"] = list(
-        dict.fromkeys(
-            f"{w.category.__name__}: {w.message}"
-            for w in caught
-            if not issubclass(w.category, DeprecationWarning)
-        )
-    )
+    record["warnings"] = kept
     return record
 
 
@@ -1812,37 +1947,20 @@ def _same_as_drawn(
 def reproduce_all(*, quick: bool = False, out_dir: str | Path = "results", **sweep: Any) -> dict:
     """Every table and figure, one after the other (each in its own ``out_dir/NAME/``);
     ``sweep`` (``jobs``, ``backend``, ``address``, ``resume``, ``progress``) goes to each.
-    Every output is checked first: without ``resume`` any that exists is an error; with it, a
-    table already written is kept and each figure's sweep goes on. Returns ``{name: results}``."""
-    progress = sweep.pop("progress", True)
-    tables = {
-        name: Path(out_dir) / name / _output_name("results", ".json", quick)
-        for name in ("table1", "table2")
-    }
-    runs = [Path(out_dir) / name / _output_name("runs", ".jsonl", quick) for name in EXPERIMENTS]
-    existing = [path for path in [*tables.values(), *runs] if path.exists()]
+    Every output is checked first: without ``resume`` any runs or results file that exists is
+    an error; with it, each sweep goes on from its runs. Returns ``{name: results}``."""
+    existing = [
+        path
+        for name in REPRODUCTIONS
+        for stem, suffix in (("runs", ".jsonl"), ("results", ".json"))
+        if (path := Path(out_dir) / name / _output_name(stem, suffix, quick)).exists()
+    ]
     if existing and not sweep.get("resume", False):  # checked before hours of work, not after
         raise ValueError(
             f"{', '.join(map(str, existing))} exist{'s' * (len(existing) == 1)}: resume "
-            "(--resume keeps the tables and runs done) or choose another output"
+            "(--resume keeps the runs done) or choose another output"
         )
-    results = {}
-    for name, path in tables.items():
-        if path.exists():
-            console.print(f"{name}: kept {path} (--resume)", soft_wrap=True)
-            results[name] = json.loads(path.read_text())
-            if results[name].get("stamp") != _settings_stamp():
-                warnings.warn(
-                    f"{path} was made with other settings (package version or zoo configs); "
-                    "it is kept as it is. For a table with today's settings, choose another "
-                    "output",
-                    stacklevel=2,
-                )
-        else:
-            results[name] = REPRODUCTIONS[name](quick=quick, out_dir=out_dir, progress=progress)
-    for name in EXPERIMENTS:
-        results[name] = reproduce(name, quick=quick, out_dir=out_dir, progress=progress, **sweep)
-    return results
+    return {name: run(quick=quick, out_dir=out_dir, **sweep) for name, run in REPRODUCTIONS.items()}
 
 
 #: ``sb3-swirl reproduce NAME``: the experiment functions by name.

@@ -533,10 +533,6 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path, capsys):
     assert "runs_quick.jsonl also holds 2 runs this command did not ask for" in " ".join(
         capsys.readouterr().err.split()
     )
-    assert main(["reproduce", "table1", "--resume", "--out", str(tmp_path)]) == 2
-    capsys.readouterr()
-    assert main(["reproduce", "table2", "--jobs", "3", "--out", str(tmp_path)]) == 2
-    assert "table2 is not a sweep (its runs go one after the other): --jobs" in _err(capsys)
     assert main(["reproduce", "fig3", "--repeats", "5", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig7", "--panels", "nope", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig7", "--methods", "ppo", "--out", str(tmp_path)]) == 2
@@ -565,14 +561,26 @@ def test_reproduce_all_checks_every_output_before_any_work(tmp_path, capsys):
 
 @pytest.mark.parametrize("name", ["table1", "table2"])
 def test_a_table_refuses_to_overwrite_its_results(tmp_path, capsys, name):
-    """A table runs whole: results already written are an error before any work, and stay."""
-    table = tmp_path / name / "results_quick.json"
-    table.parent.mkdir()
-    table.write_text('{"kept": true}')
+    """A table is a sweep: its runs already there need --resume, and results written without
+    runs beside them (an older version's) are an error, with --resume too; nothing is
+    touched."""
+    folder = tmp_path / name
+    folder.mkdir()
+    runs = folder / "runs_quick.jsonl"
+    runs.write_text("")
     assert main(["reproduce", name, "--quick", "--out", str(tmp_path), "-q"]) == 2
-    assert f"{name}/results_quick.json exists: {name} is not overwritten" in _err(capsys)
+    assert "runs_quick.jsonl exists: resume the sweep (--resume)" in _err(capsys)
+    runs.unlink()
+    table = folder / "results_quick.json"
+    table.write_text('{"kept": true}')
+    for resume in ([], ["--resume"]):
+        assert main(["reproduce", name, "--quick", "--out", str(tmp_path), "-q", *resume]) == 2
+        assert (
+            f"{name}/results_quick.json exists without its runs (runs_quick.jsonl), so --resume "
+            "cannot go on from it: it is not overwritten" in _err(capsys)
+        )
     assert table.read_text() == '{"kept": true}'
-    assert sorted(p.name for p in table.parent.iterdir()) == ["results_quick.json"]
+    assert sorted(p.name for p in folder.iterdir()) == ["results_quick.json"]
 
 
 def test_transfer_runs_take_demos_on_one_env_and_learn_on_another():

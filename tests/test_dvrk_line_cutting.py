@@ -358,14 +358,34 @@ def test_swirl_pipeline_learns_to_position_and_cut(entry_demos):
     assert untrained == 0.0 and cloned >= 0.4 and trained >= cloned, (untrained, cloned, trained)
 
 
+def test_table2_jobs_run_in_worker_processes_as_in_this_one(tmp_path):
+    """Table 2 is a sweep: its jobs (one per seed and line) give JSON records, the same in a
+    worker process as in this one, so --jobs and Ray do not change the table."""
+    import json
+
+    from sb3_swirl.experiments import table2_run
+    from sb3_swirl.runner import run_sweep
+
+    job = {"seed": 0, "radius": 3.0, "episodes": 1, "n_eval": 2}
+    (record,) = run_sweep(table2_run, [job], tmp_path / "runs.jsonl", n_jobs=2, progress=False)
+    assert record == json.loads(json.dumps(table2_run(**job)))
+    for method in ("svm", "swirl"):
+        assert 0.0 <= record[method]["success_rate"] <= record[method]["began_cut_rate"] <= 1.0
+    assert record["swirl"]["began_cut_rate"] == 1.0  # the demos' start is found on an arc too
+
+
 @pytest.mark.slow
-def test_reproduce_table2_quick(tmp_path):
+def test_reproduce_table2_quick(tmp_path, capsys):
     import json
 
     from sb3_swirl.experiments import reproduce_table2
 
-    reproduce_table2(quick=True, out_dir=tmp_path, progress=False)
+    first = reproduce_table2(quick=True, out_dir=tmp_path, progress=False)  # 2 jobs at once
     results = json.loads((tmp_path / "table2" / "results_quick.json").read_text())
+    assert results == json.loads(json.dumps(first))
+    # a sweep of one job per line: resumed, it trains nothing and reads the same
+    assert reproduce_table2(quick=True, out_dir=tmp_path, progress=False, resume=True) == first
+    assert "kept 3 runs done before (--resume)" in capsys.readouterr().err
     assert [entry["radius_cm"] for entry in results["summary"]] == [None, 3.0, 1.5]
     for run in results["runs"]:
         for method in ("svm", "swirl"):

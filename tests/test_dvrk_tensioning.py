@@ -222,8 +222,13 @@ def test_reproduce_table1_quick(tmp_path, capsys):
 
     from sb3_swirl.experiments import reproduce_table1
 
-    reproduce_table1(quick=True, out_dir=tmp_path, progress=False)
+    first = reproduce_table1(quick=True, out_dir=tmp_path, progress=False)  # 2 jobs at once
     results = json.loads((tmp_path / "table1" / "results_quick.json").read_text())
+    assert results == json.loads(json.dumps(first))
+    # a sweep of 4 jobs (3 learners, the rest): resumed, it trains nothing and reads the same
+    assert reproduce_table1(quick=True, out_dir=tmp_path, progress=False, resume=True) == first
+    err = " ".join(capsys.readouterr().err.split())
+    assert "kept 4 runs done before (--resume)" in err
     summary = results["summary"]
     assert set(summary) == {"rl", "bc", "segmented_bc", "swirl", "swirl_no_bc", "supervisor"}
     for row in summary.values():
@@ -232,8 +237,6 @@ def test_reproduce_table1_quick(tmp_path, capsys):
     assert summary["supervisor"]["success_rate"] == 1.0
     assert results["settings"]["seeds"] == [0] and results["n_segments"][0] >= 2
     gain = results["swirl_gain_over_segmented_bc"]  # a loss reads "worse", not "-x% better"
-    said = re.search(
-        r"SWIRL's value is (\d+\.\d)% (better|worse)", " ".join(capsys.readouterr().err.split())
-    )
+    said = re.search(r"SWIRL's value is (\d+\.\d)% (better|worse)", err)
     assert said and said[2] == ("better" if gain >= 0 else "worse")
     assert float(said[1]) == pytest.approx(abs(gain) * 100, abs=0.05)
