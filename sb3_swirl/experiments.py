@@ -69,6 +69,21 @@ def _kept_warnings() -> Iterator[list[str]]:
     )
 
 
+def _say_others(runs_file: Path, work: list[dict[str, Any]], which: str) -> None:
+    """Say so when a resumed sweep's ``runs_file`` holds runs that ``work`` does not ask for
+    (``which``: "other seeds, ..."): the results cover only this call's runs."""
+    from sb3_swirl.runner import _key, _read_done
+
+    others = len(_read_done(runs_file).keys() - {_key(job) for job in work})
+    if others > 0:
+        console.print(
+            f"{runs_file.name} also holds {others} run{'s' * (others != 1)} this command did not "
+            f"ask for ({which}); the results cover only this command's runs: ask for them all, "
+            "with --resume, to see them together",
+            soft_wrap=True,
+        )
+
+
 def _table_sweep(
     name: str,
     function: Any,
@@ -106,6 +121,7 @@ def _table_sweep(
         progress=progress,
         stamp=_settings_stamp(),
     )
+    _say_others(runs_file, work, "other seeds")
     texts = [text for record in records for text in record["warnings"]]
     for text in dict.fromkeys(texts):  # a seed's fit warns in each of its runs: said once
         console.print(f"warning ({texts.count(text)} of {len(records)} runs): {text}")
@@ -1686,7 +1702,7 @@ def reproduce(
         Demo sets of Fig. 9 (seeds 100, 101, ...; the paper used 100, the full setting 20).
     backend, jobs, address : see :func:`sb3_swirl.runner.run_sweep`
     """
-    from sb3_swirl.runner import _key, _read_done, run_sweep
+    from sb3_swirl.runner import run_sweep
 
     experiment = EXPERIMENTS[check_option("experiment", name, tuple(EXPERIMENTS))]
     # each once, in the order given: a repeated one would count its runs twice
@@ -1733,14 +1749,7 @@ def reproduce(
     warned = sum(bool(run.get("warnings")) for run in runs)
     if warned:
         console.print(f"{warned} of {len(runs)} runs warned (their fits: runs[].warnings)")
-    others = len(_read_done(runs_file).keys() - {_key(job) for job in work})
-    if others > 0:  # a resumed sweep of a part: the results cover only that part
-        console.print(
-            f"{runs_file.name} also holds {others} run{'s' * (others != 1)} this command did not "
-            "ask for (other seeds, panels or methods); the results and the figure cover "
-            "only this command's runs: ask for them all, with --resume, to draw them together",
-            soft_wrap=True,
-        )
+    _say_others(runs_file, work, "other seeds, panels or methods")
     results = {
         "figure": name,
         "title": experiment.title,
