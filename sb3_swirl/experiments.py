@@ -69,6 +69,21 @@ def _kept_warnings() -> Iterator[list[str]]:
     )
 
 
+def _sweep_outputs(out_dir: str | Path, name: str, quick: bool) -> tuple[Path, Path]:
+    """Sweep ``name``'s runs file and results file. Results without the runs beside them (an
+    earlier version's table, or runs moved away) are an error, with ``resume`` too: a sweep
+    cannot go on from them, and they are not overwritten."""
+    out = Path(out_dir) / name
+    runs_file = out / _output_name("runs", ".jsonl", quick)
+    results = out / _output_name("results", ".json", quick)
+    if results.exists() and not runs_file.exists():
+        raise ValueError(
+            f"{results} exists without its runs ({runs_file.name}), so --resume cannot go on "
+            "from it: it is not overwritten; move it away or choose another output"
+        )
+    return runs_file, results
+
+
 def _say_others(runs_file: Path, work: list[dict[str, Any]], which: str) -> None:
     """Say so when a resumed sweep's ``runs_file`` holds runs that ``work`` does not ask for
     (``which``: "other seeds, ..."): the results cover only this call's runs."""
@@ -97,19 +112,10 @@ def _table_sweep(
     progress: bool,
 ) -> tuple[list[dict[str, Any]], Path]:
     """Table ``name``'s jobs through :func:`sb3_swirl.runner.run_sweep` into
-    ``out_dir/name/runs.jsonl``; their records, and where the table's results go. Results
-    written without a runs file beside them (an older version's) are an error, not
-    overwritten."""
+    ``out_dir/name/runs.jsonl``; their records, and where the table's results go."""
     from sb3_swirl.runner import run_sweep
 
-    out = Path(out_dir) / name
-    path = out / _output_name("results", ".json", quick)
-    runs_file = out / _output_name("runs", ".jsonl", quick)
-    if path.exists() and not runs_file.exists():
-        raise ValueError(
-            f"{path} exists without its runs ({runs_file.name}), so --resume cannot go on from "
-            "it: it is not overwritten; move it away or choose another output"
-        )
+    runs_file, path = _sweep_outputs(out_dir, name, quick)
     records = run_sweep(
         function,
         work,
@@ -798,13 +804,6 @@ def _score_episodes(episodes: list[list[dict[str, Any]]]) -> dict[str, float]:
     }
 
 
-#: Table 1's jobs per seed: the learners (long) and the methods scored without training
-_TABLE1_GROUPS = {
-    "rl": ("rl",),
-    "swirl": ("swirl",),
-    "swirl_no_bc": ("swirl_no_bc",),
-    "clones": ("bc", "segmented_bc", "supervisor"),
-}
 #: Table 1's learners: (algorithm, whether it learns from the demos, hyperparameter overrides)
 _TABLE1_LEARNERS: dict[str, tuple[str, bool, dict[str, Any]]] = {
     "rl": ("dqn", False, {}),
@@ -820,6 +819,8 @@ _TABLE1_LEARNERS: dict[str, tuple[str, bool, dict[str, Any]]] = {
         },
     ),
 }
+#: Table 1's jobs per seed: each learner (long), and the methods scored without training
+_TABLE1_GROUPS = (*_TABLE1_LEARNERS, "clones")
 
 
 def table1_run(seed: int, group: str, steps: int, n_eval: int) -> dict[str, Any]:
@@ -844,7 +845,7 @@ def table1_run(seed: int, group: str, steps: int, n_eval: int) -> dict[str, Any]
     from sb3_swirl.supervisors import TensioningSupervisor, collect_demos
     from swirl_wrappers import SwirlWrapper
 
-    check_option("group", group, tuple(_TABLE1_GROUPS))
+    check_option("group", group, _TABLE1_GROUPS)
     torch.set_num_threads(1)  # tiny networks: extra threads only contend for the cores
     base = PRESETS["tensioning"]
     # train_and_evaluate's own evaluation runs once, at the end, on one episode: every method
@@ -1719,13 +1720,13 @@ def reproduce(
     if seeds is None:
         seeds = list(experiment.seeds[: experiment.quick_seeds] if quick else experiment.seeds)
     seeds = _checked_seeds(seeds)
-    out = Path(out_dir) / name  # made by run_sweep, which removes it if no run starts
+    # the folder is made by run_sweep, which removes it if no run starts
+    runs_file, saved = _sweep_outputs(out_dir, name, quick)
     labels, work = _jobs(experiment, panels, methods, seeds, quick)
     stamp = _settings_stamp()
     console.rule(f"[bold]{experiment.title}: {len(work)} run{'s' * (len(work) != 1)}, {backend}")
     if quick:
         console.print(_quick_note(experiment))
-    runs_file = out / _output_name("runs", ".jsonl", quick)
     records = run_sweep(
         method_run,
         work,
@@ -1764,8 +1765,7 @@ def reproduce(
         "ratios": ratios,
         "runs": runs,
     }
-    saved = out / _output_name("results", ".json", quick)
-    figure = out / _output_name("figure", ".png", quick)
+    figure = saved.with_name(_output_name("figure", ".png", quick))
     write_results(results, saved)
     _plot_experiment(experiment, panels, methods, runs, figure, quick)
     claim = experiment.claim
@@ -1958,12 +1958,8 @@ def reproduce_all(*, quick: bool = False, out_dir: str | Path = "results", **swe
     ``sweep`` (``jobs``, ``backend``, ``address``, ``resume``, ``progress``) goes to each.
     Every output is checked first: without ``resume`` any runs or results file that exists is
     an error; with it, each sweep goes on from its runs. Returns ``{name: results}``."""
-    existing = [
-        path
-        for name in REPRODUCTIONS
-        for stem, suffix in (("runs", ".jsonl"), ("results", ".json"))
-        if (path := Path(out_dir) / name / _output_name(stem, suffix, quick)).exists()
-    ]
+    outputs = [_sweep_outputs(out_dir, name, quick) for name in REPRODUCTIONS]
+    existing = [path for pair in outputs for path in pair if path.exists()]
     if existing and not sweep.get("resume", False):  # checked before hours of work, not after
         raise ValueError(
             f"{', '.join(map(str, existing))} exist{'s' * (len(existing) == 1)}: resume "

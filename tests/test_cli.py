@@ -551,12 +551,17 @@ def _err(capsys) -> str:
 def test_reproduce_all_checks_every_output_before_any_work(tmp_path, capsys):
     """A table's results or a figure's runs already there: one error up front, not after the
     tables have run (and been overwritten)."""
-    table = tmp_path / "table1" / "results_quick.json"
-    table.parent.mkdir()
-    table.write_text("{}")
+    runs = tmp_path / "table2" / "runs_quick.jsonl"
+    runs.parent.mkdir()
+    runs.write_text("")
     assert main(["reproduce", "all", "--quick", "--out", str(tmp_path), "-q"]) == 2
-    assert "table1/results_quick.json exists: resume (--resume" in capsys.readouterr().err
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["table1"]  # nothing else was made
+    assert "table2/runs_quick.jsonl exists: resume (--resume" in _err(capsys)
+    # results without their runs (an earlier version's table): --resume cannot go on from them
+    (tmp_path / "fig3").mkdir()
+    (tmp_path / "fig3" / "results_quick.json").write_text("{}")
+    assert main(["reproduce", "all", "--quick", "--out", str(tmp_path), "-q", "--resume"]) == 2
+    assert "fig3/results_quick.json exists without its runs (runs_quick.jsonl)" in _err(capsys)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig3", "table2"]  # nothing was made
 
 
 @pytest.mark.parametrize("name", ["table1", "table2"])
