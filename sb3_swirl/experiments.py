@@ -128,9 +128,13 @@ def _table_sweep(
         stamp=_settings_stamp(),
     )
     _say_others(runs_file, work, "other seeds")
-    texts = [text for record in records for text in record["warnings"]]
-    for text in dict.fromkeys(texts):  # a seed's fit warns in each of its runs: said once
-        console.print(f"warning ({texts.count(text)} of {len(records)} runs): {text}")
+    warned: dict[str, list[int]] = {}  # a seed's fit warns in each of its runs: said once
+    for job, record in zip(work, records, strict=True):
+        for text in record["warnings"]:
+            warned.setdefault(text, []).append(job["seed"])
+    for text, seeds in warned.items():
+        which = ", ".join(map(str, dict.fromkeys(seeds)))
+        console.print(f"warning (seed {which}; {len(seeds)} of {len(records)} runs): {text}")
     return records, path
 
 
