@@ -549,8 +549,8 @@ def _err(capsys) -> str:
 
 
 def test_reproduce_all_checks_every_output_before_any_work(tmp_path, capsys):
-    """A table's results or a figure's runs already there: one error up front, not after the
-    tables have run (and been overwritten)."""
+    """A table's or a figure's runs already there, or results without their runs: one error
+    up front, not after hours of other sweeps."""
     runs = tmp_path / "table2" / "runs_quick.jsonl"
     runs.parent.mkdir()
     runs.write_text("")
