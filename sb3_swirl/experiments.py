@@ -99,43 +99,36 @@ def _say_others(runs_file: Path, work: list[dict[str, Any]], which: str) -> None
         )
 
 
-def _table_sweep(
+def _sweep(
     name: str,
     function: Any,
     work: list[dict[str, Any]],
     quick: bool,
     out_dir: str | Path,
-    backend: str,
-    jobs: int,
-    address: str | None,
-    resume: bool,
-    progress: bool,
-) -> tuple[list[dict[str, Any]], Path]:
-    """Table ``name``'s jobs through :func:`sb3_swirl.runner.run_sweep` into
-    ``out_dir/name/runs.jsonl``; their records, and where the table's results go."""
+    **sweep: Any,
+) -> tuple[list[dict[str, Any]], Path, Path, dict[str, str]]:
+    """Table or figure ``name``'s jobs through :func:`sb3_swirl.runner.run_sweep` (``sweep``:
+    its ``backend``, ``n_jobs``, ``address``, ``resume``, ``progress``) into
+    ``out_dir/name/runs.jsonl``, stamped with :func:`_settings_stamp`: their records, the
+    runs file, where the results go and the stamp."""
     from sb3_swirl.runner import run_sweep
 
-    runs_file, path = _sweep_outputs(out_dir, name, quick)
-    records = run_sweep(
-        function,
-        work,
-        runs_file,
-        backend=backend,
-        n_jobs=jobs,
-        address=address,
-        resume=resume,
-        progress=progress,
-        stamp=_settings_stamp(),
-    )
-    _say_others(runs_file, work, "other seeds")
-    warned: dict[str, list[int]] = {}  # a seed's fit warns in each of its runs: said once
+    runs_file, results = _sweep_outputs(out_dir, name, quick)
+    stamp = _settings_stamp()
+    records = run_sweep(function, work, runs_file, stamp=stamp, **sweep)
+    return records, runs_file, results, stamp
+
+
+def _table_warnings(work: list[dict[str, Any]], records: list[dict[str, Any]]) -> None:
+    """Print each warning of a table's runs once, with the seeds whose runs raised it (a
+    seed's fit warns in each of its runs)."""
+    warned: dict[str, list[int]] = {}
     for job, record in zip(work, records, strict=True):
         for text in record["warnings"]:
             warned.setdefault(text, []).append(job["seed"])
     for text, seeds in warned.items():
         which = ", ".join(map(str, dict.fromkeys(seeds)))
         console.print(f"warning (seed {which}; {len(seeds)} of {len(records)} runs): {text}")
-    return records, path
 
 
 @dataclass(frozen=True)
@@ -950,9 +943,20 @@ def reproduce_table1(
         for seed in seeds
         for group in _TABLE1_GROUPS
     ]
-    records, path = _table_sweep(
-        "table1", table1_run, work, quick, out_dir, backend, jobs, address, resume, progress
+    records, runs_file, path, stamp = _sweep(
+        "table1",
+        table1_run,
+        work,
+        quick,
+        out_dir,
+        backend=backend,
+        n_jobs=jobs,
+        address=address,
+        resume=resume,
+        progress=progress,
     )
+    _say_others(runs_file, work, "other seeds")
+    _table_warnings(work, records)
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name in _TABLE1_LABELS}
     segments = []
     for job, record in zip(work, records, strict=True):
@@ -988,7 +992,7 @@ def reproduce_table1(
         "swirl_gain_over_segmented_bc": gain,
         "paper_swirl_gain_over_segmented_bc": 1.0
         - PAPER_TABLE1["swirl"] / PAPER_TABLE1["segmented_bc"],
-        "stamp": _settings_stamp(),
+        "stamp": stamp,
     }
     write_results(results, path)
 
@@ -1155,9 +1159,20 @@ def reproduce_table2(
         for seed in seeds
         for radius in radii
     ]
-    records, path = _table_sweep(
-        "table2", table2_run, work, quick, out_dir, backend, jobs, address, resume, progress
+    records, runs_file, path, stamp = _sweep(
+        "table2",
+        table2_run,
+        work,
+        quick,
+        out_dir,
+        backend=backend,
+        n_jobs=jobs,
+        address=address,
+        resume=resume,
+        progress=progress,
     )
+    _say_others(runs_file, work, "other seeds")
+    _table_warnings(work, records)
     runs = [
         {"seed": job["seed"], "radius_cm": job["radius"], "n_segments": record["n_segments"]}
         | {method: record[method] for method in ("svm", "swirl")}
@@ -1197,7 +1212,7 @@ def reproduce_table2(
         "runs": runs,
         "summary": summary,
         "swirl_successes": [combined, n_eval * len(runs)],
-        "stamp": _settings_stamp(),
+        "stamp": stamp,
     }
     write_results(results, path)
 
@@ -1707,8 +1722,6 @@ def reproduce(
         Demo sets of Fig. 9 (seeds 100, 101, ...; the paper used 100, the full setting 20).
     backend, jobs, address : see :func:`sb3_swirl.runner.run_sweep`
     """
-    from sb3_swirl.runner import run_sweep
-
     experiment = EXPERIMENTS[check_option("experiment", name, tuple(EXPERIMENTS))]
     # each once, in the order given: a repeated one would count its runs twice
     panels = list(dict.fromkeys(experiment.panels if panels is None else panels))
@@ -1724,23 +1737,22 @@ def reproduce(
     if seeds is None:
         seeds = list(experiment.seeds[: experiment.quick_seeds] if quick else experiment.seeds)
     seeds = _checked_seeds(seeds)
-    # the folder is made by run_sweep, which removes it if no run starts
-    runs_file, saved = _sweep_outputs(out_dir, name, quick)
     labels, work = _jobs(experiment, panels, methods, seeds, quick)
-    stamp = _settings_stamp()
     console.rule(f"[bold]{experiment.title}: {len(work)} run{'s' * (len(work) != 1)}, {backend}")
     if quick:
         console.print(_quick_note(experiment))
-    records = run_sweep(
+    # the folder is made by run_sweep, which removes it if no run starts
+    records, runs_file, saved, stamp = _sweep(
+        name,
         method_run,
         work,
-        runs_file,
+        quick,
+        out_dir,
         backend=backend,
         n_jobs=jobs,
         address=address,
         resume=resume,
         progress=progress,
-        stamp=stamp,
     )
     runs = [
         {"panel": panel, "label": label, "x": x, "seed": seed, "job": job} | record
