@@ -105,17 +105,30 @@ def _sweep(
     work: list[dict[str, Any]],
     quick: bool,
     out_dir: str | Path,
-    **sweep: Any,
+    backend: str,
+    jobs: int,
+    address: str | None,
+    resume: bool,
+    progress: bool,
 ) -> tuple[list[dict[str, Any]], Path, Path, dict[str, str]]:
-    """Table or figure ``name``'s jobs through :func:`sb3_swirl.runner.run_sweep` (``sweep``:
-    its ``backend``, ``n_jobs``, ``address``, ``resume``, ``progress``) into
+    """Table or figure ``name``'s jobs through :func:`sb3_swirl.runner.run_sweep` into
     ``out_dir/name/runs.jsonl``, stamped with :func:`_settings_stamp`: their records, the
     runs file, where the results go and the stamp."""
     from sb3_swirl.runner import run_sweep
 
     runs_file, results = _sweep_outputs(out_dir, name, quick)
     stamp = _settings_stamp()
-    records = run_sweep(function, work, runs_file, stamp=stamp, **sweep)
+    records = run_sweep(
+        function,
+        work,
+        runs_file,
+        backend=backend,
+        n_jobs=jobs,
+        address=address,
+        resume=resume,
+        progress=progress,
+        stamp=stamp,
+    )
     return records, runs_file, results, stamp
 
 
@@ -944,16 +957,7 @@ def reproduce_table1(
         for group in _TABLE1_GROUPS
     ]
     records, runs_file, path, stamp = _sweep(
-        "table1",
-        table1_run,
-        work,
-        quick,
-        out_dir,
-        backend=backend,
-        n_jobs=jobs,
-        address=address,
-        resume=resume,
-        progress=progress,
+        "table1", table1_run, work, quick, out_dir, backend, jobs, address, resume, progress
     )
     _say_others(runs_file, work, "other seeds")
     _table_warnings(work, records)
@@ -1160,16 +1164,7 @@ def reproduce_table2(
         for radius in radii
     ]
     records, runs_file, path, stamp = _sweep(
-        "table2",
-        table2_run,
-        work,
-        quick,
-        out_dir,
-        backend=backend,
-        n_jobs=jobs,
-        address=address,
-        resume=resume,
-        progress=progress,
+        "table2", table2_run, work, quick, out_dir, backend, jobs, address, resume, progress
     )
     _say_others(runs_file, work, "other seeds")
     _table_warnings(work, records)
@@ -1743,16 +1738,7 @@ def reproduce(
         console.print(_quick_note(experiment))
     # the folder is made by run_sweep, which removes it if no run starts
     records, runs_file, saved, stamp = _sweep(
-        name,
-        method_run,
-        work,
-        quick,
-        out_dir,
-        backend=backend,
-        n_jobs=jobs,
-        address=address,
-        resume=resume,
-        progress=progress,
+        name, method_run, work, quick, out_dir, backend, jobs, address, resume, progress
     )
     runs = [
         {"panel": panel, "label": label, "x": x, "seed": seed, "job": job} | record
