@@ -507,12 +507,22 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         scale = design.std(axis=0) + 1e-8
         scale[-1] = 1.0
         z = design / scale
+        # a state coordinate the segment holds constant is the intercept again: its effect
+        # cannot be told apart, so it is estimated as 0 (an action the segment always takes
+        # keeps the segment's motion as its effect: the one-hot design's reading)
+        p = x.shape[1]
+        z[:, :p][:, design[:, :p].std(axis=0) <= 1e-9 * (1.0 + np.abs(x).max(axis=0))] = 0.0
         # the ridge also settles actions a segment never shows (their effect estimate is 0)
         # and the one-hot columns' collinearity with the intercept
         ridge = self.regularization * len(x) * np.eye(z.shape[1])
         ridge[-1, -1] = 1e-9 * len(x)
-        coef = np.linalg.solve(z.T @ z + ridge, z.T @ next_x) / scale[:, None]
-        p, m = x.shape[1], u.shape[1]
+        gram, moment = z.T @ z + ridge, z.T @ next_x
+        try:
+            coef = np.linalg.solve(gram, moment)
+        except np.linalg.LinAlgError:  # action columns constant and collinear in the segment
+            coef = np.linalg.lstsq(gram, moment, rcond=None)[0]
+        coef = coef / scale[:, None]
+        m = u.shape[1]
         return coef[:p].T, coef[p : p + m].T, coef[-1]
 
     def _optimise(

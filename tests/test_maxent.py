@@ -125,6 +125,35 @@ def test_discrete_maxent_recovers_the_cost_shape_of_a_grid_task(known_model, val
     assert weight[0, 0] > 2 * weight[1, 1]
 
 
+def test_a_constant_coordinate_or_collinear_actions_do_not_break_the_linear_model():
+    """A coordinate no demo moves (a fixed goal entry) or action columns the segment holds
+    constant and collinear made the linear model's normal equations singular (numpy's
+    LinAlgError). The constant coordinate now gets no effect and weight 0, and the other
+    coordinates read as without it."""
+    psi, goal = np.diag([1.0, 0.2]), np.array([6.0, 2.0])
+    demos, _ = _grid_demos(psi, goal)
+    region = [Region(goal, np.eye(2), 1e-9)]
+    plain = MaxEntIRLRewardLearner(normalize=False).fit(demos, region).rewards_[0].weight
+    padded = [Demonstration(np.c_[d.observations, np.full(len(d.observations), 3.0)], d.actions) for d in demos]
+    with pytest.warns(UserWarning, match=r"dimensions \[2\] are constant"):
+        weight = (
+            MaxEntIRLRewardLearner(normalize=False)
+            .fit(padded, [Region(np.r_[goal, 3.0], np.eye(3), 1e-9)])
+            .rewards_[0]
+            .weight
+        )
+    assert np.all(weight[2] == 0.0) and np.all(weight[:, 2] == 0.0)
+    np.testing.assert_allclose(weight[:2, :2], plain, rtol=1e-3)
+    # continuous actions, two columns that say the same (one constant value in the segment)
+    rng = np.random.default_rng(0)
+    steps = [
+        Demonstration(np.cumsum(rng.normal(size=(20, 2)), axis=0), np.ones((19, 2)))
+        for _ in range(5)
+    ]
+    reward = MaxEntIRLRewardLearner().fit(steps, [Region(np.zeros(2), np.eye(2), 1e-9)])
+    assert np.all(np.isfinite(reward.rewards_[0].weight))
+
+
 def test_fit_task_maxent_on_parking_gives_an_ordinary_task():
     """fit_task(reward="maxent") with estimated and with the env's known dynamics: PSD local
     rewards, a TaskModel that round-trips through JSON and drives the wrapper."""
