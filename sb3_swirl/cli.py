@@ -592,7 +592,7 @@ def build_parser() -> argparse.ArgumentParser:
 _AS_FLAGS = [
     (re.compile(r"indicator='(\w+)'"), r"--indicator \1"),
     (re.compile(r"min_demo_fraction=(\S+?)(?=[ ,;)]|$)"), r"--min-demo-fraction \1"),
-    (re.compile(r"lower min_demo_fraction"), "lower --min-demo-fraction"),
+    (re.compile(r"(lower|raise) min_demo_fraction"), r"\1 --min-demo-fraction"),
     (re.compile(r"the indicator or window"), "--indicator or --window"),
     (re.compile(r"a longer window"), "a longer --window"),
     (re.compile(r"merge_fragments=True"), "without --no-merge-fragments"),

@@ -1932,6 +1932,19 @@ by "+", or callable, default "auto"
                 )
                 + f", {need} needed ({shown}). {advice}"
             )
+        short = [p for n, p in enumerate(problems) if n not in excused and "never" in p]
+        if short:
+            warnings.warn(
+                f"{len(short)} of {len(segments)} demonstrations do not reach every region in "
+                f"order ({'; '.join(short[:5])}{'; ...' if len(short) > 5 else ''}): "
+                f"min_demo_fraction={self.min_demo_fraction} keeps regions that {need} of "
+                f"{len(segments)} demos pass. Such a demo stays in the segment before the "
+                "region it misses to its end, so its later states shape that segment's reward "
+                "and a BC start (SwirlDQN) clones its later actions under that segment. Fix or "
+                "drop those demos, or raise min_demo_fraction",
+                SegmentationWarning,
+                stacklevel=4,
+            )
         if excused:
             warnings.warn(
                 f"Demos {excused} start inside the goal region (where the demos end), as in a "

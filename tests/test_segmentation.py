@@ -167,15 +167,28 @@ def test_pruning_drops_a_transition_only_some_demos_make(indicator):
     demos, apexes = _with_detour(demos, switches, 3, np.random.default_rng(0))
     # The pruning on the demos as given: the inserted detour changes those demos' rate.
     kw = {"indicator": indicator, "normalize_time": False, "random_state": 0}
-    strict = TransitionStateClustering(**kw).fit(demos)
+    with warnings.catch_warnings(record=True) as clean:
+        warnings.simplefilter("always")
+        strict = TransitionStateClustering(**kw).fit(demos)
+    assert not [w for w in clean if "every region in order" in str(w.message)]
     assert len(strict.regions_) == 3
     assert min(_dist_to_detour(r.mean, apexes) for r in strict.regions_) > 5
     loose = TransitionStateClustering(min_demo_fraction=0.3, **kw)
-    loose.fit(demos)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        loose.fit(demos)
     assert len(loose.regions_) > 3
     assert min(_dist_to_detour(r.mean, apexes) for r in loose.regions_) < 2
-    # The demonstrations that make the detour pass through every region.
+    # The demonstrations that make the detour pass through every region. Those that do not
+    # reach every region (with the GMM and linear indicators: the others) are named.
     assert all((segs >= 0).all() for segs in loose.segments_[:3])
+    short = [n for n, segs in enumerate(loose.segments_) if (segs < 0).any()]
+    assert (min(short) >= 3) if short else indicator == "velocity"
+    told = [str(w.message) for w in caught if "every region in order" in str(w.message)]
+    assert bool(told) == bool(short)
+    if short:
+        assert f"demo {short[0]} never reaches region" in told[0]
+        assert "min_demo_fraction=0.3" in told[0]
 
 
 def test_same_seed_gives_identical_regions(three_phases):
