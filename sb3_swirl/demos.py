@@ -543,6 +543,8 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
       by more than 2 the other way, as a demo recorded at another sampling rate does; or whose
       number of steps alone differs by more than 3 (incomplete?). The windowed transition
       indicators compare steps across demos, so such a demo can merge or hide segments.
+    * **A demo that never moves** (every state the same) among demos that do is a warning:
+      it ends where it starts, inside the goal region, and the fit then fails on it.
 
     Parameters
     ----------
@@ -570,6 +572,17 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
                 f"dimension over all demos ({spread[dim]:.3g} around {centre[dim]:.3g}): a "
                 "corrupted value? Fix or drop the demo"
             )
+    still = [n for n, x in enumerate(states) if len(x) > 1 and not np.ptp(x, axis=0).any()]
+    moving = sum(len(x) > 1 for x in states) - len(still)
+    messages = []
+    if still and moving:
+        messages.append(
+            f"demo{'s' if len(still) > 1 else ''} {', '.join(map(str, still))} never "
+            f"move{'' if len(still) > 1 else 's'} (every state the same, while {moving} other "
+            "demos move): such a demo shows no transition and ends where it starts, inside "
+            "the goal region, so the fit cannot count it as reaching the regions. A recording "
+            "that did not run? Drop it"
+        )
     found = []
     for n, (step, length) in enumerate(_rate_ratios(states, spread)):
         if _off(step, _RATE_FACTOR) and _off(length, 2.0) and (step > 1) != (length > 1):
@@ -579,12 +592,12 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
             found.append((n, "number of steps", length, _LENGTH_WHY))
     if len(states) == 2 and len(found) == 2:  # two demos: which one is off cannot be told
         n, what, factor, why = max(found, key=lambda f: f[2])
-        messages = [
+        messages.append(
             f"demos 0 and 1: the {what} of demo {n} is {factor:.2g} times demo {1 - n}'s: one "
             f"of them {why}"
-        ]
+        )
     else:
-        messages = [
+        messages += [
             f"demo {n}: its {what} is "
             + (f"{factor:.2g} times" if factor > 1 else f"1/{1 / factor:.2g} of")
             + f" the other demos' (median): {why}"

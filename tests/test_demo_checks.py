@@ -77,6 +77,19 @@ def test_an_incomplete_demo_is_named(parking_states):
         check_demos_agree(as_demonstrations(demos))
 
 
+def test_a_demo_that_never_moves_is_named_before_the_fit_fails_on_it(parking_states):
+    """A recording that did not run (every state the same) ends where it starts, inside the
+    goal region: the fit's error then lists it beside demos it blames wrongly."""
+    demos = [*parking_states, np.tile(parking_states[0][0], (60, 1))]
+    with pytest.warns(DemoWarning, match=r"demo 5 never moves \(every state the same, while 5"):
+        check_demos_agree(as_demonstrations(demos))
+    with pytest.warns(DemoWarning, match="demo 5 never moves"):
+        with pytest.raises(ValueError):
+            fit_task(demos, reg_covar=0.1, random_state=0)
+    # demos that all rest in one place (a task of holding a state) are not blamed
+    assert _agree([np.tile(x[0], (60, 1)) for x in parking_states]) == []
+
+
 def test_an_absurd_value_is_an_error_naming_demo_step_and_dimension(parking_states):
     corrupted = [x.copy() for x in parking_states]
     corrupted[3][17, 2] = 1e150  # finite, below the overflow limit
