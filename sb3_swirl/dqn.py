@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import pickle
 import warnings
+import zipfile
 from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -130,6 +132,38 @@ def _atomic_save(path: Any, suffix: str, write: Any) -> None:
     target.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(target, "wb") as fh:
         write(fh)
+
+
+def _check_model_zip(path: Path, name: str) -> None:
+    """Refuse, naming the file, what SB3's ``load`` would fail on deep inside: a file that is
+    not a saved model (the demos' ``.npz``, a task JSON) or a model of another algorithm."""
+    if not path.is_file() and path.suffix != ".zip":
+        path = path.with_name(path.name + ".zip")  # SB3's load adds the suffix too
+    if not path.is_file():
+        return  # SB3 says the file is not found
+    if not zipfile.is_zipfile(path):
+        raise ValueError(f"{name} is not a model saved by SwirlDQN.save (not a zip file)")
+    with zipfile.ZipFile(path) as archive:
+        names = archive.namelist()
+        data = json.loads(archive.read("data")) if "data" in names else None
+    if data is None:
+        demos = any(n.endswith(".npy") for n in names)
+        raise ValueError(
+            f"{name} is not a model saved by SwirlDQN.save"
+            + (
+                ": it holds arrays, as a demos file does (load those with load_demos)"
+                if demos
+                else ""
+            )
+        )
+    if data.get("task_json") is None:
+        policy = data.get("policy_class")
+        module = policy.get("__module__", "") if isinstance(policy, dict) else ""
+        raise ValueError(
+            f"{name} holds no SWIRL task: not a SwirlDQN model"
+            + (f" (its policy comes from {module})" if module else "")
+            + "; load it with its own algorithm (a plain DQN's with stable_baselines3.DQN.load)"
+        )
 
 
 class SwirlDQN(DQN):
@@ -1039,6 +1073,8 @@ class SwirlDQN(DQN):
                 f"env= carries no SWIRL task: wrap it with the one {name} holds, "
                 f"`SwirlWrapper(env, SwirlDQN.load({name!r}).task)`, or load without env="
             )
+        if isinstance(path, str | os.PathLike):
+            _check_model_zip(Path(path), name)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             model = super().load(path, *args, **kwargs)

@@ -14,7 +14,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNormalize
 
 import sb3_swirl.envs  # noqa: F401  (registers the envs)
-from sb3_swirl.demos import Demonstration, DemoWarning
+from sb3_swirl.demos import Demonstration, DemoWarning, save_demos
 from sb3_swirl.dqn import SwirlDQN
 from sb3_swirl.experiments import PRESETS
 from sb3_swirl.features import RBFFeaturesExtractor
@@ -269,7 +269,7 @@ def test_a_model_saved_before_learning_keeps_its_demonstrations(tmp_path):
 def test_save_is_atomic_and_refuses_a_folder_and_load_a_plain_dqn(tmp_path, monkeypatch):
     """A save cut short (Ctrl-C, a full disk) leaves the model it replaces; a folder is an
     error, not PATH_2; a zip that holds no SWIRL task is refused at load, naming it."""
-    from stable_baselines3 import DQN
+    from stable_baselines3 import DQN, PPO
 
     model = SwirlDQN("MlpPolicy", point_env(), bc_epochs=0, seed=0)
     model.save(tmp_path / "models" / "model")  # as in SB3: .zip added, the folder made
@@ -318,6 +318,18 @@ def test_save_is_atomic_and_refuses_a_folder_and_load_a_plain_dqn(tmp_path, monk
     DQN("MlpPolicy", "CartPole-v1").save(tmp_path / "plain.zip")
     with pytest.raises(ValueError, match=r"plain.zip holds no SWIRL task: not a SwirlDQN model"):
         SwirlDQN.load(tmp_path / "plain.zip")
+    # another algorithm's model, the demos file, a task JSON: SB3 failed deep inside on them
+    # (a policy without q_net, "No data found in the saved file", "wasn't a zip-file")
+    PPO("MlpPolicy", "CartPole-v1", n_steps=16, batch_size=16).save(tmp_path / "ppo")
+    save_demos(point_demos(2), tmp_path / "demos.npz")
+    (tmp_path / "task.json").write_text(model.task.to_json())
+    for file, said in [
+        ("ppo", r"ppo holds no SWIRL task: .*stable_baselines3.common.policies"),
+        ("demos.npz", r"demos.npz is not a model saved by SwirlDQN.save: .* load_demos"),
+        ("task.json", r"task.json is not a model saved by SwirlDQN.save \(not a zip file\)"),
+    ]:
+        with pytest.raises(ValueError, match=said):
+            SwirlDQN.load(tmp_path / file)
 
 
 def test_bc_under_vec_normalize_updates_the_statistics_with_the_demo_states():
