@@ -134,6 +134,21 @@ def _atomic_save(path: Any, suffix: str, write: Any) -> None:
         write(fh)
 
 
+def _check_train_freq(train_freq: Any) -> None:
+    """``train_freq`` as SB3 takes it, an int >= 1 or ``(n, "step" | "episode")``: SB3's own
+    assertion comes only inside ``learn``, after the behavioural cloning."""
+    if isinstance(train_freq, tuple) and len(train_freq) == 2:
+        check_int("train_freq[0]", train_freq[0], low=1)
+        unit = getattr(train_freq[1], "value", train_freq[1])  # SB3's TrainFrequencyUnit too
+        check_option("train_freq[1]", unit, ("step", "episode"))
+    elif not isinstance(train_freq, tuple):
+        check_int("train_freq", train_freq, low=1)
+    else:
+        raise ValueError(
+            f"train_freq must be an int or (n, 'step' | 'episode'), got {train_freq!r}"
+        )
+
+
 def _check_model_zip(path: Path, name: str) -> None:
     """Refuse, naming the file, what SB3's ``load`` would fail on deep inside: a file that is
     not a saved model (the demos' ``.npz``, a task JSON) or a model of another algorithm."""
@@ -309,8 +324,15 @@ class SwirlDQN(DQN):
             ("target_update_interval", target_update_interval, 1),
             ("gradient_steps", gradient_steps, -1),  # -1: as many as the env steps
             ("n_steps", n_steps, 1),
+            ("stats_window_size", stats_window_size, 1),
+            ("verbose", verbose, 0),
         ):
             check_int(name, value, low=low)
+        _check_train_freq(train_freq)
+        if tensorboard_log is not None and not isinstance(tensorboard_log, str | os.PathLike):
+            raise ValueError(
+                f"tensorboard_log must be a folder path or None, got {tensorboard_log!r}"
+            )
         for name, value in (
             ("gamma", gamma),
             ("tau", tau),

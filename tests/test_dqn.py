@@ -245,11 +245,23 @@ def test_a_batch_larger_than_the_demo_pairs_is_all_of_them():
         (dict(max_grad_norm=-1), "max_grad_norm must be a finite number > 0"),
         (dict(learning_rate=-1e-3), "learning_rate must be a finite number > 0"),
         (dict(seed=1.5), "seed must be an integer"),
+        (dict(train_freq=0), "train_freq must be an integer >= 1, got 0"),
+        (dict(train_freq=(0, "episode")), r"train_freq\[0\] must be an integer >= 1"),
+        (dict(train_freq=(1, "epoch")), r"train_freq\[1\] must be one of \['episode', 'step'\]"),
+        (dict(verbose="2"), "verbose must be an integer >= 0, got '2'"),
+        (dict(tensorboard_log=123), "tensorboard_log must be a folder path or None, got 123"),
     ],
 )
 def test_bad_settings_fail_at_construction(kwargs, match):
     with pytest.raises(ValueError, match=match):
         SwirlDQN("MlpPolicy", point_env(), demonstrations=point_demos(2), **kwargs)
+
+
+def test_train_freq_takes_what_sb3_takes():
+    from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
+
+    for freq in (1, (2, "step"), (1, "episode"), TrainFreq(3, TrainFrequencyUnit.EPISODE)):
+        SwirlDQN("MlpPolicy", point_env(), train_freq=freq, bc_epochs=0, seed=0).learn(5)
 
 
 def test_a_task_that_is_not_a_task_model_is_named_before_the_env_is_read():
