@@ -650,7 +650,18 @@ class SwirlDQN(DQN):
                 kept
             )
         if not self._bc_done and self.demonstrations:
+            before = self.num_timesteps
             self.pretrain()
+            labelling = self.num_timesteps - before
+            if labelling and self.num_timesteps >= result[0]:
+                warnings.warn(
+                    f"labelling the state-only demos took {labelling} env steps "
+                    f"(inverse_dynamics_steps={self.inverse_dynamics_steps}), which count "
+                    f"toward learn's budget: this learn ends at {self.num_timesteps} steps, "
+                    "past its total_timesteps and without Q-learning. Give learn more steps, "
+                    "or fewer inverse_dynamics_steps",
+                    stacklevel=3,
+                )
         return result
 
     def _sample_action(
@@ -850,6 +861,14 @@ class SwirlDQN(DQN):
             labels = self.infer_demo_actions([d["states"] for d in missing])
             for demo, label in zip(missing, labels, strict=True):
                 demo["actions"] = label[: len(demo["reward"])]
+        elif missing and len(missing) < len(demos):
+            unlabelled = [n for n, d in enumerate(demos) if d["actions"] is None]
+            warnings.warn(
+                f"demos {unlabelled} have no actions and infer_actions='none': BC leaves them "
+                f"out and clones the other {len(demos) - len(missing)} (infer_actions="
+                "'inverse_dynamics' labels them)",
+                stacklevel=2,
+            )
         demos = [d for d in demos if d["actions"] is not None]
         self._bc_done = True
         if not demos:

@@ -660,6 +660,20 @@ def test_the_labelling_steps_count_as_the_agents_own(by_hand):
     assert progress.n_episodes <= model._episode_num - model.inverse_dynamics_episodes_ - 1
 
 
+def test_a_budget_smaller_than_the_labelling_steps_is_said():
+    """learn(100) with 300 labelling steps ran 300 steps and no Q-learning, without a word."""
+    state_only = [Demonstration(d.observations) for d in point_demos(2)]
+    model = SwirlDQN(
+        "MlpPolicy", point_env(), demonstrations=state_only, inverse_dynamics_steps=300, seed=0
+    )
+    with pytest.warns(UserWarning, match=r"took 300 env steps .* ends at 300 steps"):
+        model.learn(100)
+    assert model.num_timesteps == 300
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model.learn(100, reset_num_timesteps=False)  # labelled once: an ordinary learn
+
+
 def test_bad_settings_and_an_unlifted_observation_are_named():
     """n_steps was unchecked (0 ran as 1, 2.5 failed inside the buffer), max_grad_norm=inf
     (DQN's "no clipping") was refused, and predicting on the env's own observation gave SB3's
@@ -719,6 +733,16 @@ def test_inverse_dynamics_refuses_bad_transitions_naming_the_problem():
     fitted = InverseDynamics(epochs=1, seed=0).fit(s, s + 0.1, a, n_actions=3)
     with pytest.raises(ValueError, match="states have 3 dims; the model was fitted on 2"):
         fitted.predict(np.zeros((2, 3)), np.zeros((2, 3)))
+
+
+def test_demos_left_out_of_bc_for_lack_of_actions_are_named():
+    demos = point_demos(3)
+    mixed = [demos[0], Demonstration(demos[1].observations), demos[2]]
+    model = SwirlDQN(
+        "MlpPolicy", point_env(), demonstrations=mixed, infer_actions="none", bc_epochs=2
+    )
+    with pytest.warns(UserWarning, match=r"demos \[1\] have no actions .* clones the other 2"):
+        model.pretrain()
 
 
 def test_bc_only_with_state_only_demos_and_no_inference_is_skipped():
