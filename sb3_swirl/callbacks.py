@@ -57,6 +57,16 @@ def _check_discount(model: Any, env: VecEnv) -> None:
         warnings.warn(mismatch, stacklevel=2)
 
 
+def _refuse_sb3_locals(cls: type, first: Any) -> None:
+    """``learn(callback=SomeCallback)``, the class not an instance: SB3 calls a callable with
+    its ``locals()`` and ``globals()`` at every step, which land in the first parameters."""
+    if isinstance(first, dict) and "self" in first and "total_timesteps" in first:
+        raise TypeError(
+            f"learn(callback={cls.__name__}) passes the class: give an instance, "
+            f"callback={cls.__name__}(...)"
+        )
+
+
 class _EpisodeTracker:
     """Per-env running sums of the true reward; a summary of each finished episode."""
 
@@ -116,6 +126,7 @@ class SegmentProgressCallback(BaseCallback):
     """
 
     def __init__(self, window_size: int = 100, n_segments: int | None = None, verbose: int = 0):
+        _refuse_sb3_locals(type(self), window_size)
         super().__init__(verbose=verbose)
         self.window_size = check_int("window_size", window_size, low=1)
         self.n_segments = None if n_segments is None else check_int("n_segments", n_segments, low=1)
@@ -126,9 +137,14 @@ class SegmentProgressCallback(BaseCallback):
 
     def _init_callback(self) -> None:
         _check_discount(self.model, self.training_env)
+        task = swirl_task(self.training_env)  # none: success and return only
         if self.n_segments is None:
-            task = swirl_task(self.training_env)  # none: success and return only
             self.n_segments = 0 if task is None else task.n_segments
+        elif task is not None and self.n_segments != task.n_segments:
+            raise ValueError(
+                f"SegmentProgressCallback(n_segments={self.n_segments}): the training env's "
+                f"task has {task.n_segments} segments (leave n_segments out to read them)"
+            )
 
     def _on_training_start(self) -> None:
         # learn() resets the env (a new _last_obs) unless it goes on with reset_num_timesteps=False:
@@ -237,6 +253,7 @@ class TaskEvalCallback(EvalCallback):
         callback_after_eval: BaseCallback | None = None,
         eval_at_start: bool = False,
     ) -> None:
+        _refuse_sb3_locals(type(self), eval_env)
         super().__init__(
             eval_env,  # eval_freq <= 0 never evaluates, as SB3's EvalCallback
             callback_on_new_best=callback_on_new_best,

@@ -361,3 +361,16 @@ def test_segment_progress_refuses_a_bad_segment_count(n_segments):
 def test_task_eval_refuses_no_episodes_and_a_fractional_frequency(kwargs, match):
     with pytest.raises(ValueError, match=f"{match} must be an integer"):
         TaskEvalCallback(point_env(), **kwargs)
+
+
+def test_a_callback_class_or_a_wrong_segment_count_is_named():
+    """learn(callback=SegmentProgressCallback), the class: SB3 called it with its locals, and
+    the error spoke of a window_size holding them. n_segments other than the task's logged
+    reach rates of segments that do not exist."""
+    model = SwirlDQN("MlpPolicy", point_env(), bc_epochs=0, seed=0)
+    for cls in (SegmentProgressCallback, TaskEvalCallback):
+        with pytest.raises(TypeError, match=rf"callback={cls.__name__}\) passes the class"):
+            model.learn(10, callback=cls)
+    with pytest.raises(ValueError, match=r"n_segments=7\): the training env's task has 2"):
+        model.learn(10, callback=SegmentProgressCallback(n_segments=7))
+    model.learn(10, callback=SegmentProgressCallback(n_segments=2))
