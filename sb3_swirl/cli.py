@@ -264,18 +264,23 @@ def _print_near_ties(kept: str, scores: dict, segments: dict) -> None:
 
 
 def _print_task(task) -> None:
+    # the metadata is the fit's record, not part of the task: a hand-edited one is shown as
+    # far as it reads
     kept = task.metadata.get("cluster_dims")  # absent from tasks fitted before it existed
-    if kept is not None:
+    if isinstance(kept, list) and all(isinstance(k, int) for k in kept):
         ignored = sorted(set(range(task.regions[0].mean.size)) - set(kept))
         console.print(
             f"transition states clustered without task-space dims {ignored}: they move on "
             "their own in each demo and cut transitions into fragments (--cluster-all-dims "
             "to use them)"
         )
+    dropped = task.metadata.get("dropped_regions")
     merged = [
         d
-        for d in task.metadata.get("dropped_regions", [])
-        if "merge_same_dynamics=True" in d["reason"]
+        for d in (dropped if isinstance(dropped, list) else [])
+        if isinstance(d, dict)
+        and "merge_same_dynamics=True" in str(d.get("reason"))
+        and isinstance(d.get("time"), int | float)
     ]
     if merged:
         steps = ", ".join(f"{d['time']:.0f}" for d in merged)

@@ -42,6 +42,12 @@ def test_demos_fit_show_round_trip(tmp_path, capsys):
     assert main(["show", str(task_path), "--plot", str(figs), "--demos", str(one)]) == 0
     assert main(["fit", str(one), "-o", str(tmp_path / "one.json")]) == 2
     assert "one.npz holds 1 demonstration: SWIRL needs at least 2" in capsys.readouterr().err
+    # the fit's record (metadata) edited by hand: the task still shows (it raised TypeError)
+    edited = json.loads(task_path.read_text())
+    for garbage in (5, [{"a": 1}], "x"):
+        edited["metadata"] |= {"dropped_regions": garbage, "cluster_dims": garbage}
+        (tmp_path / "edited.json").write_text(json.dumps(edited))
+        assert main(["show", str(tmp_path / "edited.json")]) == 0
 
 
 def test_fit_with_angles_matches_the_python_api(tmp_path):
