@@ -275,15 +275,32 @@ class _SwirlEnvFactory:
 
     def __call__(self) -> gym.Env:
         if isinstance(self.env, str):
-            try:  # as SB3's make_vec_env: rgb_array frames where the env can render
-                base = gym.make(self.env, **{"render_mode": "rgb_array", **self.env_kwargs})
-            except TypeError:
+            # as SB3's make_vec_env: rgb_array frames where the env can render (not asked of
+            # an env whose metadata lists other modes: gymnasium would warn at every make)
+            if _renders_rgb_array(self.env):
+                try:
+                    base = gym.make(self.env, **{"render_mode": "rgb_array", **self.env_kwargs})
+                except TypeError:
+                    base = gym.make(self.env, **self.env_kwargs)
+            else:
                 base = gym.make(self.env, **self.env_kwargs)
         elif isinstance(self.env, gym.Env):
             base = self.env
         else:
             base = self.env(**self.env_kwargs)
         return SwirlWrapper(base, self.task, **self.wrapper_kwargs)
+
+
+def _renders_rgb_array(env_id: str) -> bool:
+    """Whether the registered env may take ``render_mode="rgb_array"``: its class's metadata
+    lists it, or says nothing of its modes (then it is tried, as SB3 does)."""
+    try:
+        entry = gym.spec(env_id).entry_point
+        creator = entry if callable(entry) else gym.envs.registration.load_env_creator(entry)
+    except (gym.error.Error, ImportError, AttributeError):  # gym.make then says why
+        return True
+    modes = getattr(creator, "metadata", {}).get("render_modes")
+    return modes is None or "rgb_array" in modes
 
 
 def make_swirl_env(

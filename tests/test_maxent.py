@@ -134,7 +134,10 @@ def test_a_constant_coordinate_or_collinear_actions_do_not_break_the_linear_mode
     demos, _ = _grid_demos(psi, goal)
     region = [Region(goal, np.eye(2), 1e-9)]
     plain = MaxEntIRLRewardLearner(normalize=False).fit(demos, region).rewards_[0].weight
-    padded = [Demonstration(np.c_[d.observations, np.full(len(d.observations), 3.0)], d.actions) for d in demos]
+    padded = [
+        Demonstration(np.c_[d.observations, np.full(len(d.observations), 3.0)], d.actions)
+        for d in demos
+    ]
     with pytest.warns(UserWarning, match=r"dimensions \[2\] are constant"):
         weight = (
             MaxEntIRLRewardLearner(normalize=False)

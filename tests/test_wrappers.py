@@ -1015,6 +1015,16 @@ def test_make_swirl_env_takes_make_vec_envs_arguments(tmp_path):
     assert isinstance(factory.envs[0].unwrapped, PointEnv)  # the factory took the setting
     with pytest.raises(TypeError, match=r"env_kwargs \['radius'\] .*got an env instance"):
         make_swirl_env(PointEnv(), line_task(), env_kwargs={"radius": 2.0})
+    # a registered env that renders no frames is not asked for them (gymnasium warned at
+    # every make that rgb_array is not among its render_modes)
+    gym.register("test_wrappers/Point-v0", entry_point=PointEnv)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            own = make_swirl_env("test_wrappers/Point-v0", line_task(), n_envs=2)
+        assert own.envs[0].render_mode is None
+    finally:
+        gym.registry.pop("test_wrappers/Point-v0")
 
 
 # ----------------------------------------------------------------------- subprocess workers
