@@ -290,10 +290,20 @@ def test_several_state_keys_are_read_joined_in_order():
     np.testing.assert_array_equal(
         wrapped.lifter.state(obs), np.concatenate([obs["observation"], obs["goal"]])
     )
-    with pytest.raises(ValueError, match=r"task does not fit the observation spaces \['goal'"):
-        SwirlWrapper(env, line_task(), state_key=["goal", "goal"])
+    with pytest.raises(ValueError, match=r"state_key names \['goal'\] more than once"):
+        SwirlWrapper(env, task, state_key=["goal", "goal"])
     with pytest.raises(ValueError, match="state_key must be a key or a list of keys"):
         SwirlWrapper(env, task, state_key=[])
+    # without state_key: the keys the task's demos were recorded with, as the fit records them
+    recorded = TaskModel(
+        task.regions, task.rewards, dims=[1, 2], metadata={"state_key": ["observation", "goal"]}
+    )
+    assert SwirlWrapper(env, recorded).state_key == ("observation", "goal")
+    elsewhere = TaskModel(
+        task.regions, task.rewards, dims=[1, 2], metadata={"state_key": ["pos", "goal"]}
+    )
+    with pytest.raises(ValueError, match="task does not fit"):  # not this env's keys: as before
+        SwirlWrapper(env, elsewhere)
 
 
 # ----------------------------------------------------------------------- validation

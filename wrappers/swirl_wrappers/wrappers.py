@@ -56,9 +56,11 @@ def lift_observation_space(
         1-D Box under each ``state_key`` and no ``"segment"`` key.
     task : TaskModel
     state_key : str or sequence of str, optional
-        For Dict spaces, the key of the state the task reads; default ``"observation"``. With
-        several keys, the task reads their 1-D Boxes concatenated in that order (e.g.
-        ``["observation", "desired_goal"]`` on a goal-conditioned env).
+        For Dict spaces, the key of the state the task reads. With several keys, the task
+        reads their 1-D Boxes concatenated in that order (e.g. ``["observation",
+        "desired_goal"]`` on a goal-conditioned env). Default: the keys the task's demos were
+        recorded with (``task.metadata["state_key"]``, where the fit recorded them and the
+        space has them), else ``"observation"``.
 
     Returns
     -------
@@ -96,6 +98,8 @@ def lift_observation_space(
         )
         return lifted, None
     if isinstance(space, spaces.Dict):
+        if state_key is None:
+            state_key = _recorded_keys(task, space)
         state, state_key = state_space(space, state_key)
         if SEGMENT_KEY in space.spaces:
             raise ValueError(f"Dict observation space already has a {SEGMENT_KEY!r} key")
@@ -173,6 +177,17 @@ def state_space(
     return joined, keys
 
 
+def _recorded_keys(task: TaskModel, space: spaces.Dict) -> str | tuple[str, ...] | None:
+    """The Dict keys the task's demos were recorded with (``metadata["state_key"]``), where the
+    fit recorded them and ``space`` holds them all; else ``None``."""
+    keys = task.metadata.get("state_key")
+    if not isinstance(keys, list | tuple) or not keys:
+        return None
+    if not all(isinstance(key, str) and key in space.spaces for key in keys):
+        return None
+    return keys[0] if len(keys) == 1 else tuple(keys)
+
+
 def _key_tuple(state_key: Any, what: str = "state_key") -> tuple[str, ...]:
     """``state_key``, one key or several, as a tuple of keys; anything else is a ``ValueError``
     (``what`` names it)."""
@@ -185,6 +200,9 @@ def _key_tuple(state_key: Any, what: str = "state_key") -> tuple[str, ...]:
     )
     if not keys or not all(isinstance(key, str) for key in keys):
         raise ValueError(f"{what} must be a key or a list of keys, got {state_key!r}")
+    twice = sorted({key for key in keys if keys.count(key) > 1})
+    if twice:
+        raise ValueError(f"{what} names {twice} more than once, got {state_key!r}")
     return keys
 
 
@@ -533,8 +551,9 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         ``Monitor`` must be outside this wrapper, to record such episodes (``make_swirl_env``
         puts it there); an SB3 ``Monitor`` inside is refused.
     state_key : str or sequence of str, optional
-        For Dict observations, the key holding the task state (default ``"observation"``), or
-        keys whose values the task reads concatenated (:func:`lift_observation_space`).
+        For Dict observations, the key holding the task state, or keys whose values the task
+        reads concatenated (default: those the task's demos were recorded with, else
+        ``"observation"``; :func:`lift_observation_space`).
 
     Attributes
     ----------
