@@ -277,6 +277,13 @@ class SwirlTaskWrapper(SwirlWrapper):
                 )
         saved = os.environ.get(TASK_FILE_ENV)
         reward = {**(reward_config or {}), **getattr(_TRIAL, "reward_config", {})}
+        # settings that cannot work, before the fit takes its time
+        RewardConfig().updated(reward)
+        if state_key is not None and not isinstance(env.observation_space, gym.spaces.Dict):
+            raise ValueError(
+                f"SwirlTaskWrapper state_key={state_key!r} is only for Dict observation "
+                f"spaces; this env's is a {type(env.observation_space).__name__}"
+            )
         if saved:  # enjoy: the task the model was trained with
             model, demonstrations = TaskModel.from_json(Path(saved)), None
         else:
@@ -329,6 +336,9 @@ _SWIRL_PARAMS = {*_WRAPPER_PARAMS, "bc_epochs", "demo_loss_coef"}
 # the settings -optimize samples beyond DQN's; without reg_covar for an entry that reads a
 # fitted task (``task:``), which is not refitted (set by ``_train``)
 _SAMPLED = {"reg_covar": True}
+# the keys -params gives (set by ``_train``): with --trial-id they override the trial's, as
+# rl_zoo3's custom hyperparameters override a loaded trial's
+_GIVEN: set[str] = set()
 
 
 def _route_trial_params(params: dict[str, Any]) -> dict[str, Any]:
@@ -368,7 +378,12 @@ def convert_swirl_dqn_params(sampled: dict[str, Any]) -> dict[str, Any]:
 
     swirl = {k: v for k, v in sampled.items() if k in _SWIRL_PARAMS}
     dqn = convert_offpolicy_params({k: v for k, v in sampled.items() if k not in swirl})
-    return _route_trial_params(dqn | swirl)
+    agent = _route_trial_params(dqn | swirl)
+    for key in _GIVEN & _WRAPPER_PARAMS.keys():  # -params reach the wrapper's own settings
+        getattr(_TRIAL, _WRAPPER_PARAMS[key]).pop(key, None)
+    if "gamma" in _GIVEN:  # and -params' gamma the shaping, as the agent
+        _TRIAL.reward_config.pop("gamma", None)
+    return agent
 
 
 def register() -> None:
@@ -453,6 +468,14 @@ def check_config(
     swirl = {key: overrides.pop(key) for key in _WRAPPER_PARAMS if key in overrides}
     _check_keys("-params", overrides, allowed | _WRAPPER_PARAMS.keys())  # for "did you mean"
     _check_keys(where, entry, allowed)
+    if "n_timesteps" not in entry:  # rl_zoo3 reads it even with -n (a KeyError deep inside)
+        raise ValueError(f"{where}: no n_timesteps (rl_zoo3 needs it; -n overrides it)")
+    bare = [w for w in _listed(entry.get("env_wrapper")) if str(w).endswith(".SwirlTaskWrapper")]
+    if bare:
+        raise ValueError(
+            f"{where}: env_wrapper {bare[0]} has no settings: give them as "
+            f"`- {bare[0]}: {{demos: ..., fit: {{...}}}}` (see zoo_configs/)"
+        )
     entry = {**entry, **overrides}
     wrappers, ours, specs = _swirl_wrappers(entry)
     if swirl:
@@ -488,7 +511,10 @@ def check_config(
         )
     if not specs:  # nothing of ours to check: rl_zoo3 builds the env
         return dict(entry)
-    env = gym.make(env_id, **(entry.get("env_kwargs") or {}))
+    try:
+        env = gym.make(env_id, **(entry.get("env_kwargs") or {}))
+    except gym.error.Error as exc:  # a dependency not installed, say
+        raise ValueError(f"{where}: {env_id}: {exc}") from None
     try:
         if algo == "swirl_dqn":
             from sb3_swirl.dqn import check_discrete_actions
@@ -518,11 +544,15 @@ def check_config(
     return dict(entry)
 
 
+def _listed(wrappers: Any) -> list[Any]:
+    """An entry's ``env_wrapper`` as a list (rl_zoo3 takes one wrapper or a list)."""
+    return list(wrappers) if isinstance(wrappers, list) else [wrappers] if wrappers else []
+
+
 def _swirl_wrappers(entry: Mapping[str, Any]) -> tuple[list[Any], list[int], list[dict]]:
     """An entry's ``env_wrapper`` list, the positions of its SwirlTaskWrappers in it, and
     (copies of) their settings."""
-    wrappers = entry.get("env_wrapper") or []
-    wrappers = list(wrappers) if isinstance(wrappers, list) else [wrappers]
+    wrappers = _listed(entry.get("env_wrapper"))
     ours = [
         i
         for i, w in enumerate(wrappers)
@@ -540,6 +570,47 @@ def _reraise_in(where: str) -> Iterator[None]:
 
 
 # ---------------------------------------------------------------------- entry points
+# the long options of rl_zoo3's scripts that sb3-swirl reads itself, before rl_zoo3 does
+_READ = {
+    "train": (
+        "--algo",
+        "--env",
+        "--conf-file",
+        "--hyperparams",
+        "--optimize-hyperparameters",
+        "--vec-env",
+        "--gym-packages",
+        "--env-kwargs",
+        "--trained-agent",
+    ),
+    "enjoy": (
+        "--algo",
+        "--env",
+        "--exp-id",
+        "--folder",
+        "--load-best",
+        "--load-checkpoint",
+        "--load-last-checkpoint",
+    ),
+}
+
+
+def _spelled_out(argv: list[str], names: tuple[str, ...]) -> list[str]:
+    """``argv`` with the options sb3-swirl reads spelled as it reads them: ``--name=value``
+    as ``--name value``, and a unique abbreviation (``--conf`` for ``--conf-file``, which
+    rl_zoo3's argparse takes) in full. Read verbatim, ``--conf mine.yml`` trained the shipped
+    config, and ``--hyperparams=...`` failed deep inside."""
+    out = []
+    for arg in argv:
+        name, eq, value = arg.partition("=")
+        if name.startswith("--") and name not in names:
+            matches = [full for full in names if full.startswith(name)]
+            if len(matches) == 1 and len(name) > 2:
+                name = matches[0]
+        out += [name, value] if eq and name in names else [name + eq + value]
+    return out
+
+
 def _option(argv: list[str], *names: str, default: str | None = None) -> str | None:
     """The value of the last ``--name value`` / ``--name=value`` among ``names`` in ``argv``."""
     value = default
@@ -556,6 +627,7 @@ def _train(argv: list[str]) -> int:
     from rl_zoo3.train import train
     from rl_zoo3.utils import ALGOS, StoreDict
 
+    _GIVEN.clear()
     algo = str(_option(argv, "--algo", default="ppo"))
     env_id = _option(argv, "--env", default="CartPole-v1")
     config = _option(argv, "-conf", "--conf-file")
@@ -604,6 +676,7 @@ def _train(argv: list[str]) -> int:
             print(f"error: {exc}", file=sys.stderr)
             return 2
         given = (overrides or {}).keys()
+        _GIVEN.update(given)
         specs = _swirl_wrappers(entry)[2]
         if specs and (_WRAPPER_PARAMS.keys() | {"gamma"}) & given:
             argv = _wrapper_params_routed(argv, entry["env_wrapper"])
@@ -848,6 +921,8 @@ def main(argv: list[str] | None = None) -> int:
 
     register()
     script, rest = argv[0], argv[1:]
+    if script in _READ:
+        rest = _spelled_out(rest, _READ[script])
     if script == "train":
         return _train(rest)
     if script == "enjoy":

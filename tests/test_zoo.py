@@ -240,6 +240,11 @@ def test_a_tuned_trials_swirl_settings_are_given_with_params_and_saved(tmp_path,
         ({"fit": 0.1}, "SwirlTaskWrapper fit: expected a mapping of settings"),
         ({"env": "MountainCarContinuous-v0"}, "SwirlDQN needs discrete actions"),
         ({"frame_stack": 2}, "frame_stack: swirl_dqn clones the demos' single states"),
+        # these failed inside rl_zoo3 (a KeyError), named the wrong thing, or came after the fit
+        ({"n_timesteps": None}, "no n_timesteps (rl_zoo3 needs it; -n overrides it)"),
+        ({"env_wrapper": "bare"}, "env_wrapper sb3_swirl.zoo.SwirlTaskWrapper has no settings"),
+        ({"reward_config": {"mode": "potentail"}}, "mode must be one of"),
+        ({"state_key": "observation"}, "state_key='observation' is only for Dict observation"),
     ],
 )
 def test_bad_yaml_fails_before_training_naming_the_problem(
@@ -252,11 +257,15 @@ def test_bad_yaml_fails_before_training_naming_the_problem(
     env_id = change.pop("env", "MountainCar-v0")
     spec = dict(entry["env_wrapper"][0]["sb3_swirl.zoo.SwirlTaskWrapper"])
     for key, value in change.items():
-        if key in ("demos", "fit", "fitt", "terminate_on_completion"):
+        if key in ("demos", "fit", "fitt", "terminate_on_completion", "reward_config", "state_key"):
             spec[key] = value
+        elif key == "n_timesteps":
+            del entry[key]
         else:
             entry[key] = value
-    if entry.get("env_wrapper"):
+    if entry.get("env_wrapper") == "bare":  # the wrapper's name without its settings
+        entry["env_wrapper"] = ["sb3_swirl.zoo.SwirlTaskWrapper"]
+    elif entry.get("env_wrapper"):
         entry["env_wrapper"] = [{"sb3_swirl.zoo.SwirlTaskWrapper": spec}]
     (tmp_path / "bad.yml").write_text(yaml.safe_dump({env_id: entry}))
     args = ["train", "--algo", "swirl_dqn", "--env", env_id, "-conf", "bad.yml", "-f", "logs"]
@@ -264,6 +273,22 @@ def test_bad_yaml_fails_before_training_naming_the_problem(
     err = capsys.readouterr().err
     assert message in err and "bad.yml" in err
     assert not (tmp_path / "logs").exists()  # nothing started
+
+
+def test_options_are_read_as_rl_zoo3_reads_them(tmp_path, monkeypatch, capsys):
+    """rl_zoo3's argparse takes unique abbreviations and --name=value: sb3-swirl read them
+    verbatim, so `--conf mine.yml` trained the shipped config (appended after it), and
+    --hyperparams=... failed deep inside."""
+    monkeypatch.chdir(tmp_path)
+    _mountaincar_demos(tmp_path / "mountaincar_demos.npz", n=2)
+    entry = dict(MOUNTAINCAR_ENTRY) | {"learning_rat": 0.001}
+    (tmp_path / "mine.yml").write_text(yaml.safe_dump({"MountainCar-v0": entry}))
+    base = ["train", "--env", "MountainCar-v0", "-f", "logs"]
+    assert zoo.main([*base, "--alg", "swirl_dqn", "--conf", "mine.yml"]) == 2
+    assert "mine.yml, entry 'MountainCar-v0': unknown key 'learning_rat'" in capsys.readouterr().err
+    assert zoo.main([*base, "--algo=swirl_dqn", "--hyperparams=learning_rat:1"]) == 2
+    assert "-params: unknown key 'learning_rat'" in capsys.readouterr().err
+    assert not (tmp_path / "logs").exists()
 
 
 def test_another_algorithm_on_a_swirl_task_keeps_the_task_for_enjoy(tmp_path, monkeypatch, capsys):
@@ -358,7 +383,8 @@ def test_optimize_two_trials_writes_the_study(tmp_path, zoo_cli):
     # trial 0 trains its own settings (rl_zoo3 alone took id 0 for none, and trained the
     # entry's); -params still override it
     base = ["train", "--algo", "swirl_dqn", "--env", PARKING, "-f", "logs", "-n", "100"]
-    out = zoo_cli(*base, *study, "--trial-id", "0", "-params", "bc_epochs:1")
+    given = ["-params", "bc_epochs:1", "reg_covar:0.05"]
+    out = zoo_cli(*base, *study, "--trial-id", "0", *given)
     assert "loading trial 0 from the Optuna study" in out
     import optuna
 
@@ -368,7 +394,11 @@ def test_optimize_two_trials_writes_the_study(tmp_path, zoo_cli):
     config = dict(yaml.load((run / "config.yml").read_text(), Loader=yaml.UnsafeLoader))
     assert config["learning_rate"] == trial.params["learning_rate"] and config["bc_epochs"] == 1
     task = sb3_swirl.TaskModel.from_json(run / "task.json")
-    assert task.metadata["segmentation"]["params"]["reg_covar"] == trial.params["reg_covar"]
+    # -params' reg_covar overrides the trial's, as the config says (the trial's won, and
+    # config.yml recorded a value the run did not use); the trial's other SWIRL settings hold
+    assert task.metadata["segmentation"]["params"]["reg_covar"] == 0.05
+    (wrapper,) = config["env_wrapper"]
+    assert wrapper["sb3_swirl.zoo.SwirlTaskWrapper"]["fit"]["reg_covar"] == 0.05
     assert task.reward_config.task_reward_weight == trial.params["task_reward_weight"]
 
 
@@ -470,7 +500,11 @@ def test_another_algorithm_is_warned_when_the_shaping_discounts_otherwise(tmp_pa
     monkeypatch.chdir(tmp_path)
     _mountaincar_demos(tmp_path / "mountaincar_demos.npz", n=2)
     spec = MOUNTAINCAR_ENTRY["env_wrapper"][0]["sb3_swirl.zoo.SwirlTaskWrapper"]
-    entry = {"policy": "MlpPolicy", "env_wrapper": [{"sb3_swirl.zoo.SwirlTaskWrapper": spec}]}
+    entry = {
+        "policy": "MlpPolicy",
+        "n_timesteps": 1000,
+        "env_wrapper": [{"sb3_swirl.zoo.SwirlTaskWrapper": spec}],
+    }
     for gamma, warned in ((0.9, True), (0.99, False)):  # the wrapper shapes with 0.99
         (tmp_path / "ppo.yml").write_text(
             yaml.safe_dump({"MountainCar-v0": entry | {"gamma": gamma}})
