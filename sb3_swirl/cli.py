@@ -199,7 +199,11 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         segmentation["merge_same_dynamics"] = True
     if args.no_align_entries:
         segmentation["align_entries"] = False
-    reward = {"metric": args.metric}
+    if args.no_normalize_time:
+        segmentation["normalize_time"] = False
+    if args.reward == "maxent" and args.metric != "mahalanobis":
+        raise ValueError("--metric is the quadratic reward's; --reward maxent learns its own")
+    reward = "maxent" if args.reward == "maxent" else {"metric": args.metric}
     with console.status(f"fitting SWIRL on {len(demos)} demos...") as status:
         task = fit_task(
             demos,
@@ -489,6 +493,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="build each region from the demos' transition states, as the paper's Algorithm 1 "
         "does (by default from their states up to a window later, where entering the region "
         "best matches the demos' own transitions)",
+    )
+    p.add_argument(
+        "--no-normalize-time",
+        action="store_true",
+        help="run the indicator on the demos as given, not resampled to a common rate "
+        "(parking's, the acrobot's and Fetch's zoo entries fit so)",
+    )
+    p.add_argument(
+        "--reward",
+        default="quadratic",
+        choices=["quadratic", "maxent"],
+        help="quadratic (default: model-free, from the segment's demo states) or maxent "
+        "(maximum-entropy IRL on the demos' actions, with a linear model of each segment)",
     )
     p.add_argument(
         "--metric",

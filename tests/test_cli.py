@@ -76,6 +76,43 @@ def test_fit_reg_covar_reaches_the_regions(tmp_path):
     from_cli = TaskModel.from_json(task_path)
     np.testing.assert_array_equal(from_cli.regions[0].covariance, direct.regions[0].covariance)
     assert np.linalg.det(from_cli.regions[0].covariance) > np.linalg.det(thin.regions[0].covariance)
+    # the fit of parking's zoo entry, and MaxEnt rewards, from the command line (neither could
+    # be spelled: no flag for normalize_time or the reward learner)
+    entry = [
+        "--indicator",
+        "gmm",
+        "--reg-covar",
+        "0.1",
+        "--no-normalize-time",
+        "--no-align-entries",
+    ]
+    for reward in ([], ["--reward", "maxent"]):
+        assert main(["fit", str(demos_path), "-o", str(task_path), *entry, *reward]) == 0
+        direct = fit_task(
+            load_demos(demos_path),
+            indicator="gmm",
+            reg_covar=0.1,
+            normalize_time=False,
+            align_entries=False,
+            reward=reward[-1] if reward else None,
+            random_state=0,
+        )
+        assert TaskModel.from_json(task_path).to_dict() == direct.to_dict()
+    assert (
+        main(
+            [
+                "fit",
+                str(demos_path),
+                "-o",
+                str(task_path),
+                "--reward",
+                "maxent",
+                "--metric",
+                "euclidean",
+            ]
+        )
+        == 2
+    )
 
 
 def test_fit_flags_turn_off_nuisance_dims_and_merging(tmp_path, capsys):
