@@ -66,9 +66,17 @@ class BCPolicy:
     ) -> None:
         self.classifier = check_option("classifier", classifier, ("mlp", "svm", "linear_svm"))
         self.state_key = state_key
-        self.hidden_layer_sizes = hidden_layer_sizes
-        self.max_iter = max_iter
-        self.random_state = random_state
+        if not isinstance(hidden_layer_sizes, Sequence) or not all(
+            isinstance(width, int | np.integer) and width >= 1 for width in hidden_layer_sizes
+        ):
+            raise ValueError(
+                f"hidden_layer_sizes must be a list of layer widths, got {hidden_layer_sizes!r}"
+            )
+        self.hidden_layer_sizes = tuple(int(width) for width in hidden_layer_sizes)
+        self.max_iter = check_int("max_iter", max_iter, low=1)
+        self.random_state = (
+            None if random_state is None else check_int("random_state", random_state, low=0)
+        )
 
     def fit(self, observations: np.ndarray, actions: np.ndarray) -> BCPolicy:
         """Fit on observations (n, d) and their discrete actions (n,); returns ``self``."""
@@ -90,6 +98,8 @@ class BCPolicy:
                 "observations must have shape (n, d) and actions shape (n,), got "
                 f"{observations.shape} and {actions.shape}"
             )
+        if not len(observations):
+            raise ValueError("BCPolicy.fit got no observations: the demos hold no steps")
         bad = np.flatnonzero(~np.isfinite(observations).all(axis=1))
         if bad.size:
             raise ValueError(f"observations contain NaN or inf (first at row {int(bad[0])})")
@@ -122,7 +132,16 @@ class BCPolicy:
         if not hasattr(self, "model_"):
             raise NotFittedError("This BCPolicy instance is not fitted yet: call fit first")
         if isinstance(observation, dict):
-            observation = observation_state(observation, self.state_key or "observation")
+            keys = self.state_key or "observation"
+            missing = [
+                k for k in ([keys] if isinstance(keys, str) else keys) if k not in observation
+            ]
+            if missing:
+                raise ValueError(
+                    f"the Dict observation has no {missing} (keys: {sorted(observation)}): "
+                    "give BCPolicy the state_key its demos were recorded with"
+                )
+            observation = observation_state(observation, keys)
         x = np.asarray(observation, dtype=np.float64)
         width = self.model_.n_features_in_  # sklearn's record of the width fitted on
         if x.ndim not in (1, 2) or x.shape[-1] != width:
@@ -130,6 +149,9 @@ class BCPolicy:
                 f"observation must have shape ({width},) or (n, {width}) as the observations "
                 f"fitted on, got {x.shape}"
             )
+        bad = np.flatnonzero(~np.isfinite(x.reshape(-1, width)).all(axis=1))
+        if bad.size:
+            raise ValueError(f"observation contains NaN or inf (first at row {int(bad[0])})")
         action = self.model_.predict(x.reshape(-1, x.shape[-1]))
         return (action if x.ndim == 2 else action[0]), None
 

@@ -165,6 +165,8 @@ def fit_task(
     >>> task.n_segments
     3
     """
+    if not (progress is None or isinstance(progress, bool) or callable(progress)):
+        raise ValueError(f"progress must be True, False or a callable, got {progress!r}")
     if progress is True:
 
         def progress(message: str) -> None:

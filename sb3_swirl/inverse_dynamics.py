@@ -67,7 +67,7 @@ class InverseDynamics:
         self.epochs = check_int("epochs", epochs, low=1)
         self.lr = check_real("lr", lr, low=0.0, low_open=True)
         self.batch_size = check_int("batch_size", batch_size, low=1)
-        self.seed = seed
+        self.seed = None if seed is None else check_int("seed", seed, low=0, high=2**32 - 1)
 
     @classmethod
     def from_kwargs(cls, kwargs: dict[str, Any] | None, seed: int | None = None) -> InverseDynamics:

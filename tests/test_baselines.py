@@ -63,9 +63,23 @@ def test_linear_svm_clones_the_parking_supervisor(demos):
         (np.where(np.arange(len(x))[:, None] == 7, np.nan, x), y, "NaN or inf .*row 7"),
         (x, y + 0.5, "integers of a Discrete action space"),
         (x, np.zeros_like(y), "one action only"),
+        (x[:0], y[:0], "got no observations"),
     ):
         with pytest.raises(ValueError, match=said):
             BCPolicy("svm", random_state=0).fit(bad_x, bad_y)
+    # settings sklearn checked only at fit, naming MLPClassifier; a NaN or a Dict without the
+    # key reached sklearn's and a bare KeyError
+    for kwargs, said in (
+        ({"hidden_layer_sizes": "64"}, "hidden_layer_sizes must be a list of layer widths"),
+        ({"max_iter": 0}, "max_iter must be an integer >= 1"),
+        ({"random_state": "a"}, "random_state must be an integer >= 0"),
+    ):
+        with pytest.raises(ValueError, match=said):
+            BCPolicy(**kwargs)
+    with pytest.raises(ValueError, match="observation contains NaN or inf"):
+        policy.predict(np.full(4, np.nan))
+    with pytest.raises(ValueError, match=r"has no \['observation'\] \(keys: \['pos'\]\)"):
+        policy.predict({"pos": x[0]})
 
 
 def test_methods_that_need_actions_say_so(demos):

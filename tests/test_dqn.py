@@ -730,6 +730,9 @@ def test_inverse_dynamics_refuses_bad_transitions_naming_the_problem():
     ):
         with pytest.raises(ValueError, match=match):
             InverseDynamics(epochs=1).fit(*args, n_actions=3)
+    for seed in ("a", -1, 1.5):  # numpy's SeedSequence said it, at fit
+        with pytest.raises(ValueError, match=rf"seed must be an integer .*got {seed!r}"):
+            InverseDynamics(seed=seed)
     fitted = InverseDynamics(epochs=1, seed=0).fit(s, s + 0.1, a, n_actions=3)
     with pytest.raises(ValueError, match="states have 3 dims; the model was fitted on 2"):
         fitted.predict(np.zeros((2, 3)), np.zeros((2, 3)))

@@ -128,6 +128,8 @@ def test_progress_callback_reports_stages(demos, capsys):
     assert seen[-1] == f"done: {task.n_segments} segments"
     fit_task(demos, random_state=0, progress=True)
     assert "learning local rewards" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="progress must be True, False or a callable, got 'yes'"):
+        fit_task(demos, random_state=0, progress="yes")  # was ignored
 
 
 def test_kernel_task_works_end_to_end(demos):
