@@ -58,6 +58,7 @@ from sb3_swirl.demos import (
 )
 from sb3_swirl.vec_env import swirl_task, trained_task
 from swirl_wrappers import RewardConfig, SwirlWrapper, TaskModel
+from swirl_wrappers._validation import check_int
 from swirl_wrappers.wrappers import StateKey, state_space
 
 __all__ = ["RL_ZOO3_VERSION", "SwirlTaskWrapper", "check_config", "main", "register"]
@@ -189,6 +190,12 @@ def _fitted_task(
         raise ValueError("SwirlTaskWrapper: give `fit` or a fitted `task`, not both")
     if not isinstance(fit, Mapping):
         raise ValueError(f"SwirlTaskWrapper fit: expected fit_task settings, got {fit!r}")
+    if "random_state" in fit:
+        raise ValueError(
+            "SwirlTaskWrapper fit: random_state is the wrapper's `seed:` (beside `fit:`), "
+            f"not a fit setting; write seed: {fit['random_state']!r}"
+        )
+    seed = check_int("SwirlTaskWrapper seed", seed, low=0, high=2**32 - 1)
     env_id = env.spec.id if env.spec is not None else repr(env)
     key = json.dumps([env_id, demos, task, dict(fit), seed, state_key], sort_keys=True, default=str)
     if key in _FITTED:

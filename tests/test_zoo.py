@@ -245,6 +245,8 @@ def test_a_tuned_trials_swirl_settings_are_given_with_params_and_saved(tmp_path,
         ({"env_wrapper": "bare"}, "env_wrapper sb3_swirl.zoo.SwirlTaskWrapper has no settings"),
         ({"reward_config": {"mode": "potentail"}}, "mode must be one of"),
         ({"state_key": "observation"}, "state_key='observation' is only for Dict observation"),
+        ({"fit": {"random_state": 5}}, "random_state is the wrapper's `seed:`"),
+        ({"seed": "x"}, "SwirlTaskWrapper seed must be an integer"),
     ],
 )
 def test_bad_yaml_fails_before_training_naming_the_problem(
@@ -257,7 +259,15 @@ def test_bad_yaml_fails_before_training_naming_the_problem(
     env_id = change.pop("env", "MountainCar-v0")
     spec = dict(entry["env_wrapper"][0]["sb3_swirl.zoo.SwirlTaskWrapper"])
     for key, value in change.items():
-        if key in ("demos", "fit", "fitt", "terminate_on_completion", "reward_config", "state_key"):
+        if key in (
+            "demos",
+            "fit",
+            "fitt",
+            "terminate_on_completion",
+            "reward_config",
+            "state_key",
+            "seed",
+        ):
             spec[key] = value
         elif key == "n_timesteps":
             del entry[key]
