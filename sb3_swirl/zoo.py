@@ -920,9 +920,20 @@ def main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] not in scripts:
         print(f"usage: sb3-swirl zoo {{{','.join(scripts)}}} [rl_zoo3 arguments, see -h]")
         if argv[:1] in (["-h"], ["--help"]):
+            print(
+                "\nrl_zoo3's scripts, with swirl_dqn among the algorithms and the shipped\n"
+                "zoo_configs/ as the default -conf for swirl_dqn and the sb3_swirl/ envs:\n"
+                "  train           train (-optimize tunes: DQN's search space and SWIRL's)\n"
+                "  enjoy           run a trained model, with the task saved in it\n"
+                "  plot_train      training curves of a run's monitor files\n"
+                "  all_plots       evaluation curves of several algorithms and envs\n"
+                "  plot_from_file  plot what all_plots saved\n"
+                "`sb3-swirl zoo SCRIPT -h` gives rl_zoo3's arguments of SCRIPT"
+            )
             return 0
         what = f"unknown script {argv[0]!r}" if argv else "no script given"
-        print(f"error: {what}; choose one of {', '.join(scripts)}", file=sys.stderr)
+        hint = " (to tune: train -optimize)" if argv[:1] in (["tune"], ["optimize"]) else ""
+        print(f"error: {what}{hint}; choose one of {', '.join(scripts)}", file=sys.stderr)
         return 2
     import sb3_swirl  # noqa: F401  (registers the sb3_swirl/ envs)
 

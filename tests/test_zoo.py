@@ -486,7 +486,10 @@ def test_an_entry_with_a_fitted_task_is_tuned_without_refitting(tmp_path, monkey
 def test_an_unknown_zoo_script_is_named(capsys):
     assert zoo.main(["bogus"]) == 2
     assert "unknown script 'bogus'; choose one of train, enjoy" in capsys.readouterr().err
+    assert zoo.main(["tune"]) == 2
+    assert "unknown script 'tune' (to tune: train -optimize)" in capsys.readouterr().err
     assert zoo.main(["-h"]) == 0
+    assert "-optimize tunes" in capsys.readouterr().out
 
 
 def test_only_errors_before_training_are_shortened():
