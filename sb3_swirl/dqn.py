@@ -425,6 +425,13 @@ class SwirlDQN(DQN):
                 self.demonstrations = _as_demonstrations(demonstrations, None, keys, minimum=1)
             self._check_demonstrations()
             self._check_relabelling()
+            if not self.demonstrations and (self.prefill_replay or self.pretrain_td_steps):
+                warnings.warn(
+                    "prefill_replay / pretrain_td_steps without demonstrations: there is "
+                    "nothing to prefill the replay buffer with or to pre-train on (nor to "
+                    "clone); give demonstrations=, or an env whose SWIRL wrapper holds them",
+                    stacklevel=2,
+                )
         elif _init_setup_model:
             raise ValueError(
                 "SwirlDQN needs an environment that carries the SWIRL task: e.g. "

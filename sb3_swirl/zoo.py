@@ -891,7 +891,10 @@ def _enjoy(argv: list[str]) -> int:
             hint = _runs_with_a_model(argv, env_id) if str(exc).startswith("No model") else ""
             print(f"error: {exc}{hint}", file=sys.stderr)
             return 2
-    print(f"sb3-swirl: the model's task, {task.n_segments} segments", flush=True)
+    print(
+        f"sb3-swirl: the model's task, {task.n_segments} segment{'s' * (task.n_segments != 1)}",
+        flush=True,
+    )
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "task.json"
         task.to_json(path)

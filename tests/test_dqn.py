@@ -968,3 +968,13 @@ def test_demos_far_outside_the_observation_bounds_are_warned_about():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         SwirlDQN("MlpPolicy", point_env(), demonstrations=demos, seed=0)
+
+
+def test_prefill_without_demonstrations_is_said():
+    """A zoo entry with a fitted task and no demos, and prefill_replay: it skipped BC and the
+    prefill without a word."""
+    with pytest.warns(UserWarning, match="prefill_replay / pretrain_td_steps without demonst"):
+        SwirlDQN("MlpPolicy", point_env(), prefill_replay=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        SwirlDQN("MlpPolicy", point_env(), demonstrations=point_demos(2), prefill_replay=True)
