@@ -1102,3 +1102,29 @@ def test_a_state_that_is_not_a_number_is_warned_about_once():
     venv.envs[1].unwrapped.pos[0] = np.inf
     with pytest.warns(UserWarning, match=r"proxy reward is -?(inf|nan) in env 1 .*\[inf\]"):
         venv.step(np.array([STAY, STAY]))
+
+
+def test_an_env_that_breaks_its_own_spaces_is_named():
+    """An observation wider than the env's space declares, or a reward of None, failed deep in
+    numpy (shapes not aligned) or in the tracker (float * NoneType)."""
+
+    class Wide(PointEnv):
+        def step(self, action):
+            obs, reward, terminated, truncated, info = super().step(action)
+            return np.r_[obs, 0.0], reward, terminated, truncated, info
+
+    class NoReward(PointEnv):
+        def step(self, action):
+            obs, _, terminated, truncated, info = super().step(action)
+            return obs, None, terminated, truncated, info
+
+    wide = SwirlWrapper(Wide(), line_task())
+    wide.reset(seed=0)
+    with pytest.raises(ValueError, match=r"observation of shape \(2,\) where its .* 1 value$"):
+        wide.step(STAY)
+    silent = SwirlWrapper(NoReward(), line_task())
+    silent.reset(seed=0)
+    with pytest.raises(ValueError, match="returned the reward None, not a number"):
+        silent.step(STAY)
+    with pytest.raises(ValueError, match=r"observation of shape \(2, 3\) where"):
+        SwirlVecEnv(DummyVecEnv([PointEnv, PointEnv]), line_task()).lifter.state(np.zeros((2, 3)))

@@ -13,6 +13,7 @@ reset ``info`` gets ``"segment"``. The environment's own info keys pass through.
 
 from __future__ import annotations
 
+import numbers
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, SupportsFloat
@@ -324,6 +325,23 @@ def observation_state(obs: Any, state_key: StateKey = None) -> np.ndarray:
     return np.concatenate([obs[key] for key in state_key], axis=-1)
 
 
+def _real(value: Any) -> bool:
+    """Whether ``value`` is a real number: numpy's scalars too, and a 0-d numeric array (some
+    envs return their reward as one)."""
+    if isinstance(value, np.ndarray):
+        return value.ndim == 0 and value.dtype.kind in "biuf"
+    return isinstance(value, numbers.Real)
+
+
+def _state_width(space: gym.Space, state_key: StateKey) -> int:
+    """The number of values of the task state in observations of ``space`` (the Box's, or
+    those under ``state_key`` joined)."""
+    if state_key is None:
+        return int(space.shape[0])
+    keys = (state_key,) if isinstance(state_key, str) else tuple(state_key)
+    return int(sum(space.spaces[key].shape[0] for key in keys))
+
+
 def _keys_read(space: gym.Space, task: TaskModel, state_key: StateKey) -> list[str]:
     """The keys of a Dict observation whose values the task reads: those of ``state_key``
     that hold one of the task's ``state_entries`` in the joined state."""
@@ -366,10 +384,27 @@ class Lifter:
         dtype = lifted.dtype if self.state_key is None else lifted[SEGMENT_KEY].dtype
         self._one_hot = np.eye(task.n_indices, dtype=dtype)
         self._one_hot.flags.writeable = False
+        self._width = (_state_width(space, self.state_key),)  # a state's shape[-1:]
 
     def state(self, obs: Any) -> np.ndarray:
-        """The task state in an (unlifted) observation or batch of observations."""
-        return observation_state(obs, self.state_key)
+        """The task state in an (unlifted) observation or batch of observations.
+
+        Raises
+        ------
+        ValueError
+            An observation of another width than the env's observation space declares (an env
+            that breaks its own space: the task's regions would read other quantities).
+        """
+        state = observation_state(obs, self.state_key)
+        shape = state.shape if isinstance(state, np.ndarray) else np.shape(state)
+        if shape[-1:] != self._width:
+            raise ValueError(
+                f"the env returned an observation of shape {np.shape(state)}"
+                + ("" if self.state_key is None else f" under {self.state_key!r}")
+                + f" where its observation space declares {self._width[0]} value"
+                + "s" * (self._width != (1,))
+            )
+        return state
 
     def lift(self, obs: Any, index: Any) -> Any:
         """``obs`` with the one-hot of ``index`` appended: an int for one observation, an array
@@ -663,6 +698,8 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, task_reward, terminated, truncated, info = self.env.step(action)
         self._warn_overwritten(info)
+        if type(task_reward) is not float and not _real(task_reward):
+            raise ValueError(f"the env's step returned the reward {task_reward!r}, not a number")
         reward, terminated = self.tracker.step(self.lifter.state(obs), task_reward, terminated)
         reward, segment = float(reward), int(self.tracker.index)
         info[SEGMENT_KEY] = segment
