@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import warnings
+import weakref
 from collections import deque
 from collections.abc import Iterable
 from typing import Any
@@ -53,8 +54,14 @@ def _check_discount(model: Any, env: VecEnv) -> None:
     if gamma is None or isinstance(model, SwirlDQN) or swirl_task(env) is None:
         return
     mismatch = get_swirl_attr(env, "reward_config").discount_mismatch(gamma, type(model).__name__)
-    if mismatch:
+    # once a learn call (SB3 stamps each with start_time), not once a callback
+    started = getattr(model, "start_time", None)
+    if mismatch and (started is None or _DISCOUNT_WARNED.get(model) != started):
+        _DISCOUNT_WARNED[model] = started
         warnings.warn(mismatch, stacklevel=2)
+
+
+_DISCOUNT_WARNED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def _refuse_sb3_locals(cls: type, first: Any) -> None:

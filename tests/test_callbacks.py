@@ -127,6 +127,12 @@ def test_callbacks_work_with_ppo_on_a_swirl_env(tmp_path):
     assert loaded.get_env().get_attr("reward_config")[0] == saved.reward_config
     log = logged(tmp_path)
     assert log["eval/success_rate"] and log["swirl/final_segment_mean"]
+    # PPO's gamma (0.99) is the shaping's: no warning; 0.9 is warned once, not once a callback
+    other = PPO("MlpPolicy", point_env(reward_config=shaped), n_steps=64, batch_size=32, gamma=0.9)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        other.learn(64, callback=[SegmentProgressCallback(), TaskEvalCallback(point_env())])
+    assert sum("gamma" in str(w.message) for w in caught) == 1
 
 
 def test_plain_env_is_scored_on_its_own_reward(tmp_path):
