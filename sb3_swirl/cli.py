@@ -113,6 +113,8 @@ def _writable_folder(path: Path) -> None:
 def _check_output(output: str, *inputs: str | None) -> None:
     """Raise before any long work unless the file ``output`` can be written and is none of
     ``inputs``."""
+    if not output.strip():
+        raise ValueError("the output (-o) is empty; give a file name")
     path = Path(output)
     for source in inputs:
         if source is not None and (

@@ -180,6 +180,8 @@ def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
     assert main(["demos", "sb3_swirl/ParallelParking-v0", "-n", "2", "-o", str(demos), "-q"]) == 0
     assert main(["fit", str(demos), "-o", str(tmp_path)]) == 2
     assert "directory" in capsys.readouterr().err
+    assert main(["fit", str(demos), "-o", ""]) == 2  # it said "the output  is a directory"
+    assert "the output (-o) is empty" in capsys.readouterr().err
     for option, value in (("--timesteps", "-5"), ("--n-demos", "1")):
         out = tmp_path / option
         assert main(["demo", "parking", option, value, "--out", str(out), "-q"]) == 2

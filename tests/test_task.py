@@ -325,6 +325,10 @@ def test_a_task_saved_with_a_byte_order_mark_reads(tmp_path):
     (tmp_path / "task.json").write_text(task.to_json(), encoding="utf-8-sig")
     assert TaskModel.from_json(tmp_path / "task.json").to_dict() == task.to_dict()
     assert TaskModel.from_json("\ufeff" + task.to_json()).to_dict() == task.to_dict()
+    # bytes too, as a file read in binary mode gives them (with the mark, or without UTF-8)
+    assert TaskModel.from_json(task.to_json().encode("utf-8-sig")).to_dict() == task.to_dict()
+    with pytest.raises(ValueError, match="bytes that are not UTF-8 text"):  # UnicodeDecodeError
+        TaskModel.from_json(b"\xff\xfe")
 
 
 def test_missing_file_is_a_value_error(tmp_path):

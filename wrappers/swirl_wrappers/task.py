@@ -993,7 +993,13 @@ class TaskModel:
         that starts like JSON is parsed as JSON text.
         """
         if isinstance(source, bytes | bytearray):  # JSON text read in binary mode
-            source = source.decode("utf-8")
+            try:
+                source = bytes(source).decode("utf-8-sig")
+            except UnicodeDecodeError:
+                raise ValueError(
+                    "TaskModel.from_json got bytes that are not UTF-8 text: not the JSON that "
+                    "TaskModel.to_json and `sb3-swirl fit` write (a model zip or demos file?)"
+                ) from None
         if not isinstance(source, str | os.PathLike):
             raise ValueError(
                 "TaskModel.from_json takes JSON text or the path of a JSON file, got "
