@@ -51,6 +51,7 @@ import yaml
 
 from sb3_swirl.demos import (
     Demonstration,
+    DemoWarning,
     check_demos_fit_spaces,
     check_demos_state_key,
     joined_state_note,
@@ -915,10 +916,35 @@ def _run(function: Any, name: str, argv: list[str]) -> None:
         sys.argv = saved
 
 
+@contextlib.contextmanager
+def _fit_warnings_on_one_line() -> Iterator[None]:
+    """While a script runs, the fit's and the demo checks' warnings print as one line each
+    (``sb3-swirl: warning: ...``), not with the file and line that raised them; others as
+    Python shows them. Only their format changes: code that records warnings still gets them."""
+    from sb3_swirl.segmentation import SegmentationWarning
+
+    formatted = warnings.formatwarning
+
+    def one_line(message: Any, category: type, *args: Any, **kwargs: Any) -> str:
+        if issubclass(category, SegmentationWarning | DemoWarning):
+            return f"sb3-swirl: warning: {message}\n"
+        return formatted(message, category, *args, **kwargs)
+
+    warnings.formatwarning = one_line
+    try:
+        yield
+    finally:
+        warnings.formatwarning = formatted
+
+
 def main(argv: list[str] | None = None) -> int:
     """``sb3-swirl zoo SCRIPT [rl_zoo3's arguments]``: SCRIPT is ``train``, ``enjoy``,
     ``plot_train``, ``all_plots`` or ``plot_from_file``."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    with _fit_warnings_on_one_line():
+        return _main(list(sys.argv[1:] if argv is None else argv))
+
+
+def _main(argv: list[str]) -> int:
     scripts = ("train", "enjoy", "plot_train", "all_plots", "plot_from_file")
     if not argv or argv[0] not in scripts:
         print(f"usage: sb3-swirl zoo {{{','.join(scripts)}}} [rl_zoo3 arguments, see -h]")

@@ -528,3 +528,18 @@ def test_another_algorithm_is_warned_when_the_shaping_discounts_otherwise(tmp_pa
         said = [str(w.message) for w in caught if "discounts with gamma" in str(w.message)]
         assert bool(said) == warned, said
         assert not said or "ppo.yml, entry 'MountainCar-v0': the SWIRL wrapper shapes" in said[0]
+
+
+def test_the_fits_warnings_print_on_one_line_during_a_script():
+    """They printed as Python shows them, with the file and line of fit_task that raised them;
+    warnings of others keep Python's format, and recorded warnings are still recorded."""
+    from sb3_swirl.segmentation import SegmentationWarning
+
+    with zoo._fit_warnings_on_one_line():
+        ours = warnings.formatwarning("fewer regions", SegmentationWarning, "fitting.py", 255)
+        theirs = warnings.formatwarning("deprecated", DeprecationWarning, "x.py", 1)
+        with pytest.warns(SegmentationWarning, match="kept"):
+            warnings.warn("kept", SegmentationWarning, stacklevel=1)
+    assert ours == "sb3-swirl: warning: fewer regions\n"
+    assert theirs.startswith("x.py:1: DeprecationWarning: deprecated")
+    assert warnings.formatwarning("a", SegmentationWarning, "f.py", 2).startswith("f.py:2")
