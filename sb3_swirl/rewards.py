@@ -507,23 +507,25 @@ class MaxEntIRLRewardLearner(StrictParamsMixin, RewardLearner):
         scale = design.std(axis=0) + 1e-8
         scale[-1] = 1.0
         z = design / scale
-        # a state coordinate the segment holds constant is the intercept again: its effect
-        # cannot be told apart, so it is estimated as 0 (an action the segment always takes
-        # keeps the segment's motion as its effect: the one-hot design's reading)
-        p = x.shape[1]
-        z[:, :p][:, design[:, :p].std(axis=0) <= 1e-9 * (1.0 + np.abs(x).max(axis=0))] = 0.0
         # the ridge also settles actions a segment never shows (their effect estimate is 0)
         # and the one-hot columns' collinearity with the intercept
         ridge = self.regularization * len(x) * np.eye(z.shape[1])
         ridge[-1, -1] = 1e-9 * len(x)
-        gram, moment = z.T @ z + ridge, z.T @ next_x
+        p = x.shape[1]
         try:
-            coef = np.linalg.solve(gram, moment)
-        except np.linalg.LinAlgError:  # action columns constant and collinear in the segment
-            coef = np.linalg.lstsq(gram, moment, rcond=None)[0]
+            coef = np.linalg.solve(z.T @ z + ridge, z.T @ next_x)
+        except np.linalg.LinAlgError:
+            # Singular where the segment holds a state coordinate constant beside an action it
+            # always takes: that coordinate is the intercept again, its effect cannot be told
+            # apart and is estimated as 0. Still singular with constant collinear action
+            # columns: the least-squares solution settles them
+            z[:, :p][:, _constant_columns(x)] = 0.0
+            try:
+                coef = np.linalg.solve(z.T @ z + ridge, z.T @ next_x)
+            except np.linalg.LinAlgError:
+                coef = np.linalg.lstsq(z.T @ z + ridge, z.T @ next_x, rcond=None)[0]
         coef = coef / scale[:, None]
-        m = u.shape[1]
-        return coef[:p].T, coef[p : p + m].T, coef[-1]
+        return coef[:p].T, coef[p : p + u.shape[1]].T, coef[-1]
 
     def _optimise(
         self, loss_of_psi: Callable[[Any], Any], x: np.ndarray, var: np.ndarray
