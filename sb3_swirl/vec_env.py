@@ -67,8 +67,7 @@ class SwirlVecEnv(TrackedTask, VecEnvWrapper):
     reward_config : RewardConfig or dict, optional
         Default: ``task.reward_config``; a dict changes only the fields it names.
     state_key : str or sequence of str, optional
-        For Dict observations, the key(s) of the task state (default: those the task's demos
-        were recorded with, else ``"observation"``; see
+        For Dict observations, the key(s) of the task state (default ``"observation"``; see
         :func:`swirl_wrappers.lift_observation_space`).
 
     Attributes

@@ -294,16 +294,17 @@ def test_several_state_keys_are_read_joined_in_order():
         SwirlWrapper(env, task, state_key=["goal", "goal"])
     with pytest.raises(ValueError, match="state_key must be a key or a list of keys"):
         SwirlWrapper(env, task, state_key=[])
-    # without state_key: the keys the task's demos were recorded with, as the fit records them
+    # without state_key the task reads "observation"; where that does not fit a task whose
+    # demos joined other keys, the error names them
     recorded = TaskModel(
         task.regions, task.rewards, dims=[1, 2], metadata={"state_key": ["observation", "goal"]}
     )
-    assert SwirlWrapper(env, recorded).state_key == ("observation", "goal")
-    elsewhere = TaskModel(
-        task.regions, task.rewards, dims=[1, 2], metadata={"state_key": ["pos", "goal"]}
+    with pytest.raises(ValueError, match=r"pass state_key=\['observation', 'goal'\]"):
+        SwirlWrapper(env, recorded)
+    assert SwirlWrapper(env, recorded, state_key=["observation", "goal"]).state_key == (
+        "observation",
+        "goal",
     )
-    with pytest.raises(ValueError, match="task does not fit"):  # not this env's keys: as before
-        SwirlWrapper(env, elsewhere)
 
 
 # ----------------------------------------------------------------------- validation
@@ -1126,5 +1127,17 @@ def test_an_env_that_breaks_its_own_spaces_is_named():
     silent.reset(seed=0)
     with pytest.raises(ValueError, match="returned the reward None, not a number"):
         silent.step(STAY)
+
+    class NumpyReward(PointEnv):  # rewards that worked before the check, and still do
+        kinds = (np.bool_(True), np.array([0.5]), np.float32(1.0), np.array(2), True, 3)
+
+        def step(self, action):
+            obs, _, terminated, truncated, info = super().step(action)
+            return obs, self.kinds[self.steps % 6], terminated, truncated, info
+
+    numpy_rewards = SwirlWrapper(NumpyReward(), line_task(), {"task_reward_weight": 1.0})
+    numpy_rewards.reset(seed=0)
+    for _ in range(6):
+        assert np.isfinite(numpy_rewards.step(STAY)[1])
     with pytest.raises(ValueError, match=r"observation of shape \(2, 3\) where"):
         SwirlVecEnv(DummyVecEnv([PointEnv, PointEnv]), line_task()).lifter.state(np.zeros((2, 3)))

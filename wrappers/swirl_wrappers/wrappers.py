@@ -13,7 +13,6 @@ reset ``info`` gets ``"segment"``. The environment's own info keys pass through.
 
 from __future__ import annotations
 
-import numbers
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, SupportsFloat
@@ -57,11 +56,9 @@ def lift_observation_space(
         1-D Box under each ``state_key`` and no ``"segment"`` key.
     task : TaskModel
     state_key : str or sequence of str, optional
-        For Dict spaces, the key of the state the task reads. With several keys, the task
-        reads their 1-D Boxes concatenated in that order (e.g. ``["observation",
-        "desired_goal"]`` on a goal-conditioned env). Default: the keys the task's demos were
-        recorded with (``task.metadata["state_key"]``, where the fit recorded them and the
-        space has them), else ``"observation"``.
+        For Dict spaces, the key of the state the task reads; default ``"observation"``. With
+        several keys, the task reads their 1-D Boxes concatenated in that order (e.g.
+        ``["observation", "desired_goal"]`` on a goal-conditioned env).
 
     Returns
     -------
@@ -99,8 +96,7 @@ def lift_observation_space(
         )
         return lifted, None
     if isinstance(space, spaces.Dict):
-        if state_key is None:
-            state_key = _recorded_keys(task, space)
+        given = state_key
         state, state_key = state_space(space, state_key)
         if SEGMENT_KEY in space.spaces:
             raise ValueError(f"Dict observation space already has a {SEGMENT_KEY!r} key")
@@ -108,7 +104,16 @@ def lift_observation_space(
             name = f"observation space[{state_key!r}]"
         else:
             name = f"observation spaces {list(state_key)} joined"
-        _check_state_space(state, task, name)
+        try:
+            _check_state_space(state, task, name)
+        except ValueError as exc:
+            recorded = _recorded_keys(task, space)
+            if given is None and recorded is not None and recorded != state_key:
+                raise ValueError(
+                    f"{exc}. The task was fitted on demos that join the keys "
+                    f"{list(_key_tuple(recorded))}: pass state_key={list(_key_tuple(recorded))}"
+                ) from exc
+            raise
         _warn_other_layout(task, state, state_key)
         segment = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
         return spaces.Dict({**space.spaces, SEGMENT_KEY: segment}), state_key
@@ -180,7 +185,8 @@ def state_space(
 
 def _recorded_keys(task: TaskModel, space: spaces.Dict) -> str | tuple[str, ...] | None:
     """The Dict keys the task's demos were recorded with (``metadata["state_key"]``), where the
-    fit recorded them and ``space`` holds them all; else ``None``."""
+    fit recorded them and ``space`` holds them all; else ``None`` (named where the default
+    ``"observation"`` does not fit the task)."""
     keys = task.metadata.get("state_key")
     if not isinstance(keys, list | tuple) or not keys:
         return None
@@ -326,11 +332,13 @@ def observation_state(obs: Any, state_key: StateKey = None) -> np.ndarray:
 
 
 def _real(value: Any) -> bool:
-    """Whether ``value`` is a real number: numpy's scalars too, and a 0-d numeric array (some
-    envs return their reward as one)."""
-    if isinstance(value, np.ndarray):
-        return value.ndim == 0 and value.dtype.kind in "biuf"
-    return isinstance(value, numbers.Real)
+    """Whether ``value`` reads as one real number: numpy's scalars (booleans too) and arrays
+    of one numeric value, as some envs return their reward."""
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError):
+        return False
+    return array.size == 1 and array.dtype.kind in "biuf"
 
 
 def _state_width(space: gym.Space, state_key: StateKey) -> int:
@@ -586,9 +594,8 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
         ``Monitor`` must be outside this wrapper, to record such episodes (``make_swirl_env``
         puts it there); an SB3 ``Monitor`` inside is refused.
     state_key : str or sequence of str, optional
-        For Dict observations, the key holding the task state, or keys whose values the task
-        reads concatenated (default: those the task's demos were recorded with, else
-        ``"observation"``; :func:`lift_observation_space`).
+        For Dict observations, the key holding the task state (default ``"observation"``), or
+        keys whose values the task reads concatenated (:func:`lift_observation_space`).
 
     Attributes
     ----------
@@ -698,7 +705,7 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, task_reward, terminated, truncated, info = self.env.step(action)
         self._warn_overwritten(info)
-        if type(task_reward) is not float and not _real(task_reward):
+        if not isinstance(task_reward, float | int) and not _real(task_reward):
             raise ValueError(f"the env's step returned the reward {task_reward!r}, not a number")
         reward, terminated = self.tracker.step(self.lifter.state(obs), task_reward, terminated)
         reward, segment = float(reward), int(self.tracker.index)
