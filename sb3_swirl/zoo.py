@@ -578,44 +578,41 @@ def _reraise_in(where: str) -> Iterator[None]:
 
 
 # ---------------------------------------------------------------------- entry points
-# the long options of rl_zoo3's scripts that sb3-swirl reads itself, before rl_zoo3 does
+# the options of rl_zoo3's scripts that sb3-swirl reads itself, before rl_zoo3 does: the
+# long ones, and the short ones a value may follow with "="
 _READ = {
     "train": (
-        "--algo",
-        "--env",
-        "--conf-file",
-        "--hyperparams",
-        "--optimize-hyperparameters",
-        "--vec-env",
-        "--gym-packages",
-        "--env-kwargs",
-        "--trained-agent",
+        ("--algo", "--env", "--conf-file", "--hyperparams", "--optimize-hyperparameters"),
+        ("--vec-env", "--gym-packages", "--env-kwargs", "--trained-agent"),
+        ("-conf", "-params", "-optimize", "-i"),
     ),
     "enjoy": (
-        "--algo",
-        "--env",
-        "--exp-id",
-        "--folder",
-        "--load-best",
-        "--load-checkpoint",
-        "--load-last-checkpoint",
+        ("--algo", "--env", "--exp-id", "--folder", "--load-best", "--load-checkpoint"),
+        ("--load-last-checkpoint",),
+        ("-f",),
     ),
 }
 
 
-def _spelled_out(argv: list[str], names: tuple[str, ...]) -> list[str]:
-    """``argv`` with the options sb3-swirl reads spelled as it reads them: ``--name=value``
-    as ``--name value``, and a unique abbreviation (``--conf`` for ``--conf-file``, which
-    rl_zoo3's argparse takes) in full. Read verbatim, ``--conf mine.yml`` trained the shipped
+def _spelled_out(argv: list[str], script: str) -> list[str]:
+    """``argv`` with the options sb3-swirl reads spelled as it reads them (``--name=value`` as
+    ``--name value``); an abbreviation of one (``--conf`` for ``--conf-file``, which rl_zoo3's
+    argparse may take) is a ValueError. Read verbatim, ``--conf mine.yml`` trained the shipped
     config, and ``--hyperparams=...`` failed deep inside."""
+    first, more, short = _READ[script]
+    names = first + more
     out = []
     for arg in argv:
         name, eq, value = arg.partition("=")
         if name.startswith("--") and name not in names:
             matches = [full for full in names if full.startswith(name)]
-            if len(matches) == 1 and len(name) > 2:
-                name = matches[0]
-        out += [name, value] if eq and name in names else [name + eq + value]
+            if matches and len(name) > 2:
+                raise ValueError(
+                    f"{name} abbreviates {' or '.join(matches)}? sb3-swirl reads "
+                    f"{'it' if len(matches) == 1 else 'them'} before rl_zoo3, by the whole "
+                    "name: write the option in full"
+                )
+        out += [name, value] if eq and name in names + short else [arg]
     return out
 
 
@@ -969,7 +966,11 @@ def _main(argv: list[str]) -> int:
     register()
     script, rest = argv[0], argv[1:]
     if script in _READ:
-        rest = _spelled_out(rest, _READ[script])
+        try:
+            rest = _spelled_out(rest, script)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     if script == "train":
         return _train(rest)
     if script == "enjoy":

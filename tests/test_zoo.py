@@ -286,18 +286,24 @@ def test_bad_yaml_fails_before_training_naming_the_problem(
 
 
 def test_options_are_read_as_rl_zoo3_reads_them(tmp_path, monkeypatch, capsys):
-    """rl_zoo3's argparse takes unique abbreviations and --name=value: sb3-swirl read them
+    """rl_zoo3's argparse takes --name=value and abbreviations: sb3-swirl read its options
     verbatim, so `--conf mine.yml` trained the shipped config (appended after it), and
-    --hyperparams=... failed deep inside."""
+    --hyperparams=... / -params=... failed deep inside (StopIteration)."""
     monkeypatch.chdir(tmp_path)
     _mountaincar_demos(tmp_path / "mountaincar_demos.npz", n=2)
     entry = dict(MOUNTAINCAR_ENTRY) | {"learning_rat": 0.001}
     (tmp_path / "mine.yml").write_text(yaml.safe_dump({"MountainCar-v0": entry}))
     base = ["train", "--env", "MountainCar-v0", "-f", "logs"]
-    assert zoo.main([*base, "--alg", "swirl_dqn", "--conf", "mine.yml"]) == 2
+    assert zoo.main([*base, "--algo=swirl_dqn", "--conf-file=mine.yml"]) == 2
     assert "mine.yml, entry 'MountainCar-v0': unknown key 'learning_rat'" in capsys.readouterr().err
-    assert zoo.main([*base, "--algo=swirl_dqn", "--hyperparams=learning_rat:1"]) == 2
-    assert "-params: unknown key 'learning_rat'" in capsys.readouterr().err
+    for params in ("--hyperparams=learning_rat:1", "-params=learning_rat:1"):
+        assert zoo.main([*base, "--algo", "swirl_dqn", params]) == 2
+        assert "-params: unknown key 'learning_rat'" in capsys.readouterr().err
+    # an abbreviation of an option sb3-swirl reads is refused, not read as something else
+    assert zoo.main([*base, "--algo", "swirl_dqn", "--conf", "mine.yml"]) == 2
+    assert "--conf abbreviates --conf-file? " in capsys.readouterr().err
+    assert zoo.main([*base, "--algo", "swirl_dqn", "--v", "1"]) == 2  # --verbose or --vec-env
+    assert "write the option in full" in capsys.readouterr().err
     assert not (tmp_path / "logs").exists()
 
 
