@@ -67,7 +67,8 @@ class BCPolicy:
         self.classifier = check_option("classifier", classifier, ("mlp", "svm", "linear_svm"))
         self.state_key = state_key
         if not isinstance(hidden_layer_sizes, Sequence) or not all(
-            isinstance(width, int | np.integer) and width >= 1 for width in hidden_layer_sizes
+            isinstance(width, int | np.integer) and not isinstance(width, bool) and width >= 1
+            for width in hidden_layer_sizes
         ):
             raise ValueError(
                 f"hidden_layer_sizes must be a list of layer widths, got {hidden_layer_sizes!r}"
@@ -75,7 +76,9 @@ class BCPolicy:
         self.hidden_layer_sizes = tuple(int(width) for width in hidden_layer_sizes)
         self.max_iter = check_int("max_iter", max_iter, low=1)
         self.random_state = (
-            None if random_state is None else check_int("random_state", random_state, low=0)
+            None
+            if random_state is None
+            else check_int("random_state", random_state, low=0, high=2**32 - 1)
         )
 
     def fit(self, observations: np.ndarray, actions: np.ndarray) -> BCPolicy:

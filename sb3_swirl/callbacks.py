@@ -137,6 +137,7 @@ class SegmentProgressCallback(BaseCallback):
         super().__init__(verbose=verbose)
         self.window_size = check_int("window_size", window_size, low=1)
         self.n_segments = None if n_segments is None else check_int("n_segments", n_segments, low=1)
+        self._given_segments = self.n_segments  # None: read from each model's env
         self.n_episodes = 0
         self._episodes: deque[dict] = deque(maxlen=window_size)
         self._tracker: _EpisodeTracker | None = None
@@ -145,12 +146,13 @@ class SegmentProgressCallback(BaseCallback):
     def _init_callback(self) -> None:
         _check_discount(self.model, self.training_env)
         task = swirl_task(self.training_env)  # none: success and return only
-        if self.n_segments is None:
+        if self._given_segments is None:
             self.n_segments = 0 if task is None else task.n_segments
-        elif task is not None and self.n_segments != task.n_segments:
+        elif task is not None and self._given_segments != task.n_segments:
+            k = task.n_segments
             raise ValueError(
-                f"SegmentProgressCallback(n_segments={self.n_segments}): the training env's "
-                f"task has {task.n_segments} segments (leave n_segments out to read them)"
+                f"SegmentProgressCallback(n_segments={self._given_segments}): the training "
+                f"env's task has {k} segment{'s' * (k != 1)} (leave n_segments out to read them)"
             )
 
     def _on_training_start(self) -> None:

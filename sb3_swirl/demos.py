@@ -544,7 +544,7 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
       number of steps alone differs by more than 3 (incomplete?). The windowed transition
       indicators compare steps across demos, so such a demo can merge or hide segments.
     * **A demo that never moves** (every state the same) among demos that do is a warning:
-      it ends where it starts, inside the goal region, and the fit then fails on it.
+      it ends where it starts, inside the goal region, and marks no transition.
 
     Parameters
     ----------
@@ -580,7 +580,7 @@ def check_demos_agree(demos: Sequence[Demonstration]) -> list[str]:
             f"demo{'s' if len(still) > 1 else ''} {', '.join(map(str, still))} never "
             f"move{'' if len(still) > 1 else 's'} (every state the same, while {moving} other "
             "demos move): such a demo shows no transition and ends where it starts, inside "
-            "the goal region, so the fit cannot count it as reaching the regions. A recording "
+            "the goal region, so it never travels to the regions the fit finds. A recording "
             "that did not run? Drop it"
         )
     found = []

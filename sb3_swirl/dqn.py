@@ -325,7 +325,7 @@ class SwirlDQN(DQN):
             ("gradient_steps", gradient_steps, -1),  # -1: as many as the env steps
             ("n_steps", n_steps, 1),
             ("stats_window_size", stats_window_size, 1),
-            ("verbose", verbose, 0),
+            ("verbose", int(verbose) if isinstance(verbose, bool) else verbose, 0),  # as SB3
         ):
             check_int(name, value, low=low)
         _check_train_freq(train_freq)

@@ -1878,14 +1878,16 @@ by "+", or callable, default "auto"
         The error says when the demonstrations end far apart (a goal that changes per episode),
         the usual reason why they start inside the goal region.
         """
-        problems, at_goal = [], []
+        problems, at_goal, lacking = [], [], []  # lacking: the demo of each problem
         for n, bounds in enumerate(segments):
             if bounds[0] == 0:
                 problems.append(f"demo {n} starts inside region 0")
                 at_goal.append(n)
+                lacking.append(n)
             elif bounds[-1] < 0:
                 missed = int(np.argmax(bounds < 0))
                 problems.append(f"demo {n} never reaches region {missed}")
+                lacking.append(n)
         complete = len(segments) - len(problems)
         goal_only = self.include_goal and len(self.regions_) == 1
         excused = at_goal if goal_only and 2 * complete >= len(segments) else []
@@ -1932,14 +1934,15 @@ by "+", or callable, default "auto"
                 )
                 + f", {need} needed ({shown}). {advice}"
             )
-        short = [p for n, p in enumerate(problems) if n not in excused and "never" in p]
+        short = [p for n, p in zip(lacking, problems, strict=True) if n not in excused]
         if short:
             warnings.warn(
                 f"{len(short)} of {len(segments)} demonstrations do not reach every region in "
                 f"order ({'; '.join(short[:5])}{'; ...' if len(short) > 5 else ''}): "
-                f"min_demo_fraction={self.min_demo_fraction} keeps regions that {need} of "
-                f"{len(segments)} demos pass. Such a demo stays in the segment before the "
-                "region it misses to its end, so its later states shape that segment's reward "
+                f"min_demo_fraction={self.min_demo_fraction} keeps regions that at least "
+                f"{need} of {len(segments)} demos pass. Such a demo stays in the segment "
+                "before the region it misses to its end, so its later states shape that "
+                "segment's reward "
                 "and a BC start (SwirlDQN) clones its later actions under that segment. Fix or "
                 "drop those demos, or raise min_demo_fraction",
                 SegmentationWarning,

@@ -19,7 +19,7 @@ from test_dqn import PointEnv, point_demos, point_env, point_task
 from sb3_swirl.callbacks import SegmentProgressCallback, TaskEvalCallback
 from sb3_swirl.dqn import SwirlDQN
 from sb3_swirl.vec_env import make_swirl_env, same_task
-from swirl_wrappers import Region, SwirlWrapper, TaskModel
+from swirl_wrappers import QuadraticReward, Region, SwirlWrapper, TaskModel
 
 
 def logged(path) -> dict[str, list[str]]:
@@ -127,12 +127,13 @@ def test_callbacks_work_with_ppo_on_a_swirl_env(tmp_path):
     assert loaded.get_env().get_attr("reward_config")[0] == saved.reward_config
     log = logged(tmp_path)
     assert log["eval/success_rate"] and log["swirl/final_segment_mean"]
-    # PPO's gamma (0.99) is the shaping's: no warning; 0.9 is warned once, not once a callback
+    # a gamma other than the shaping's is warned once a learn call, not once a callback
     other = PPO("MlpPolicy", point_env(reward_config=shaped), n_steps=64, batch_size=32, gamma=0.9)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        other.learn(64, callback=[SegmentProgressCallback(), TaskEvalCallback(point_env())])
-    assert sum("gamma" in str(w.message) for w in caught) == 1
+    for _ in range(2):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            other.learn(64, callback=[SegmentProgressCallback(), TaskEvalCallback(point_env())])
+        assert sum("discounts with gamma" in str(w.message) for w in caught) == 1
 
 
 def test_plain_env_is_scored_on_its_own_reward(tmp_path):
@@ -380,3 +381,10 @@ def test_a_callback_class_or_a_wrong_segment_count_is_named():
     with pytest.raises(ValueError, match=r"n_segments=7\): the training env's task has 2"):
         model.learn(10, callback=SegmentProgressCallback(n_segments=7))
     model.learn(10, callback=SegmentProgressCallback(n_segments=2))
+    # one callback, read afresh for a model whose task has another number of segments
+    reused = SegmentProgressCallback()
+    model.learn(10, callback=reused)
+    one = TaskModel([Region([0.0], [[1.0]], 1.0)], [QuadraticReward([0.0], [[1.0]])], dims=[0])
+    other = SwirlDQN("MlpPolicy", SwirlWrapper(PointEnv(), one), bc_epochs=0, seed=0)
+    other.learn(10, callback=reused)
+    assert reused.n_segments == 1

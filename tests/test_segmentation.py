@@ -758,3 +758,15 @@ def test_entries_far_from_the_demos_transitions_are_warned_about(seed):
         warnings.simplefilter("error", SegmentationWarning)
         tsc = TransitionStateClustering(random_state=0).fit(_corners(seed, jitter=0.0))
     assert len(tsc.regions_) == 3
+
+
+def test_every_incomplete_demo_is_named_beside_those_that_start_at_the_goal():
+    """A demo that never reaches the goal was left out of the warning when its place in the
+    list of problems equalled the id of a demo excused for starting at the goal."""
+    tsc = TransitionStateClustering(min_demo_fraction=0.5)
+    tsc.regions_ = [Region(np.zeros(1), np.eye(1), 1.0)]  # the goal alone
+    segments = [np.array([b]) for b in (5, 0, -1, 4, 6, 3)]  # demo 1 at the goal, 2 never
+    with pytest.warns(SegmentationWarning) as caught:
+        tsc._check_complete(segments, [np.zeros((8, 1))] * 6)
+    told = " ".join(str(w.message) for w in caught)
+    assert "demo 2 never reaches region 0" in told and "Demos [1] start inside the goal" in told
