@@ -72,7 +72,7 @@ def test_linear_svm_clones_the_parking_supervisor(demos):
     for kwargs, said in (
         ({"hidden_layer_sizes": "64"}, "hidden_layer_sizes must be a list of layer widths"),
         ({"max_iter": 0}, "max_iter must be an integer >= 1"),
-        ({"random_state": "a"}, "random_state must be an integer >= 0"),
+        ({"random_state": "a"}, r"random_state must be an integer in \[0, 4294967295\]"),
     ):
         with pytest.raises(ValueError, match=said):
             BCPolicy(**kwargs)
