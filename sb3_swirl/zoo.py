@@ -581,16 +581,32 @@ def _reraise_in(where: str) -> Iterator[None]:
 # the options of rl_zoo3's scripts that sb3-swirl reads itself, before rl_zoo3 does: the
 # long ones, and the short ones a value may follow with "="
 _READ = {
-    "train": (
-        ("--algo", "--env", "--conf-file", "--hyperparams", "--optimize-hyperparameters"),
-        ("--vec-env", "--gym-packages", "--env-kwargs", "--trained-agent"),
-        ("-conf", "-params", "-optimize", "-i"),
-    ),
-    "enjoy": (
-        ("--algo", "--env", "--exp-id", "--folder", "--load-best", "--load-checkpoint"),
-        ("--load-last-checkpoint",),
-        ("-f",),
-    ),
+    "train": {
+        "long": (
+            "--algo",
+            "--env",
+            "--conf-file",
+            "--hyperparams",
+            "--optimize-hyperparameters",
+            "--vec-env",
+            "--gym-packages",
+            "--env-kwargs",
+            "--trained-agent",
+        ),
+        "short": ("-conf", "-params", "-optimize", "-i"),
+    },
+    "enjoy": {
+        "long": (
+            "--algo",
+            "--env",
+            "--exp-id",
+            "--folder",
+            "--load-best",
+            "--load-checkpoint",
+            "--load-last-checkpoint",
+        ),
+        "short": ("-f",),
+    },
 }
 
 
@@ -599,8 +615,7 @@ def _spelled_out(argv: list[str], script: str) -> list[str]:
     ``--name value``); an abbreviation of one (``--conf`` for ``--conf-file``, which rl_zoo3's
     argparse may take) is a ValueError. Read verbatim, ``--conf mine.yml`` trained the shipped
     config, and ``--hyperparams=...`` failed deep inside."""
-    first, more, short = _READ[script]
-    names = first + more
+    names, short = _READ[script]["long"], _READ[script]["short"]
     out = []
     for arg in argv:
         name, eq, value = arg.partition("=")
