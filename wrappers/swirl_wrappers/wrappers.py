@@ -341,15 +341,6 @@ def _real(value: Any) -> bool:
     return array.size == 1 and array.dtype.kind in "biuf"
 
 
-def _state_width(space: gym.Space, state_key: StateKey) -> int:
-    """The number of values of the task state in observations of ``space`` (the Box's, or
-    those under ``state_key`` joined)."""
-    if state_key is None:
-        return int(space.shape[0])
-    keys = (state_key,) if isinstance(state_key, str) else tuple(state_key)
-    return int(sum(space.spaces[key].shape[0] for key in keys))
-
-
 def _keys_read(space: gym.Space, task: TaskModel, state_key: StateKey) -> list[str]:
     """The keys of a Dict observation whose values the task reads: those of ``state_key``
     that hold one of the task's ``state_entries`` in the joined state."""
@@ -392,7 +383,8 @@ class Lifter:
         dtype = lifted.dtype if self.state_key is None else lifted[SEGMENT_KEY].dtype
         self._one_hot = np.eye(task.n_indices, dtype=dtype)
         self._one_hot.flags.writeable = False
-        self._width = (_state_width(space, self.state_key),)  # a state's shape[-1:]
+        state = space if self.state_key is None else state_space(space, self.state_key)[0]
+        self._width = state.shape[-1:]  # what a state's shape ends with
 
     def state(self, obs: Any) -> np.ndarray:
         """The task state in an (unlifted) observation or batch of observations.
