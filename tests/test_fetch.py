@@ -93,6 +93,10 @@ def test_steps_add_up_exactly():
         ({"observation_dims": [0.5]}, "observation_dims must be a non-empty list of ints"),
         ({"observation_dims": [3, 10]}, r"distinct entries of Fetch's 10-dim observation"),
         ({"observation_dims": [1, 1]}, r"distinct entries of Fetch's 10-dim observation"),
+        # a string read as true, or failed in float() without the setting's name
+        ({"goal_offset": "false"}, "goal_offset must be True or False, got 'false'"),
+        ({"terminate_on_success": "no"}, "terminate_on_success must be True or False"),
+        ({"step_size": "big"}, "step_size must be a finite number, got 'big'"),
     ],
 )
 def test_bad_settings_are_refused(kwargs, message):

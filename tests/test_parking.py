@@ -288,6 +288,9 @@ def test_bad_input_raises():
             ParallelParkingEnv(**kwargs)
     with pytest.raises(ValueError, match="speed unit"):
         ParallelParkingEnv(max_speed=0.01)
+    for name in ("partial_observation", "observe_displacement", "perturbed"):  # "no" was on
+        with pytest.raises(ValueError, match=f"{name} must be True or False, got 'no'"):
+            ParallelParkingEnv(**{name: "no"})
     with pytest.raises(ValueError, match="finite"):
         env.set_state(float("nan"), 0.0, 0.0)
     with pytest.raises(ValueError, match="multiple"):

@@ -38,6 +38,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from swirl_wrappers._validation import check_bool, check_real
+
 #: +x, -x, +y, -y, +z, -z: the end-effector moves (unit vectors, world frame)
 DIRECTIONS = np.array(
     [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float
@@ -123,7 +125,7 @@ class FetchDiscreteEnv(gym.Env):
     ) -> None:
         if task not in self.TASKS:
             raise ValueError(f"task must be one of {self.TASKS}, got {task!r}")
-        step_size = float(step_size)
+        step_size = check_real("step_size", step_size)
         if not 0.0 < step_size <= _FETCH_ACTION_SCALE:
             raise ValueError(
                 f"step_size must be in (0, {_FETCH_ACTION_SCALE}] m (Fetch moves at most "
@@ -133,8 +135,8 @@ class FetchDiscreteEnv(gym.Env):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.task = task
         self.step_size = step_size
-        self.terminate_on_success = bool(terminate_on_success)
-        self.min_goal_distance = float(min_goal_distance)
+        self.terminate_on_success = check_bool("terminate_on_success", terminate_on_success)
+        self.min_goal_distance = check_real("min_goal_distance", min_goal_distance)
         if not 0.0 <= self.min_goal_distance <= 0.2:
             raise ValueError(
                 f"min_goal_distance must be in [0, 0.2] m (Fetch's goals lie within about "
@@ -142,7 +144,7 @@ class FetchDiscreteEnv(gym.Env):
             )
         self.render_mode = render_mode
         self.fetch = _make_fetch(task, render_mode, fetch_kwargs)
-        self.goal_offset = bool(goal_offset)
+        self.goal_offset = check_bool("goal_offset", goal_offset)
         keys = dict(self.fetch.observation_space.spaces)
         size = keys["observation"].shape[0]
         self.observation_dims = _check_dims(observation_dims, size)

@@ -24,7 +24,7 @@ import numpy as np
 from gymnasium import spaces
 
 from sb3_swirl.envs._angles import wrap_angle
-from swirl_wrappers._validation import check_real
+from swirl_wrappers._validation import check_bool, check_real
 
 #: Action indices of :class:`ParallelParkingEnv` (see its docstring for the table).
 NOOP, ACCELERATE, DECELERATE, STEER_LEFT, STEER_RIGHT = range(5)
@@ -162,6 +162,9 @@ class ParallelParkingEnv(gym.Env):
                 f"render_mode must be one of {self.metadata['render_modes']} or None, "
                 f"got {render_mode!r}"
             )
+        partial_observation = check_bool("partial_observation", partial_observation)
+        observe_displacement = check_bool("observe_displacement", observe_displacement)
+        perturbed = check_bool("perturbed", perturbed)
         dt = check_real("dt", dt, low=0.0, low_open=True)
         noise_probability = check_real("noise_probability", noise_probability, low=0.0, high=1.0)
         max_steering_deg = check_real(
