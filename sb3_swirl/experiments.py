@@ -15,7 +15,7 @@ import sys
 import textwrap
 import time
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from functools import partial
@@ -69,6 +69,20 @@ def _kept_warnings() -> Iterator[list[str]]:
     )
 
 
+def _check_outputs(folder: Path, names: Sequence[str]) -> None:
+    """Raise before any work where the files ``names`` cannot be written into ``folder``: it,
+    or the first of its parents that exists, is a file, or one of the names is a folder (the
+    write failed after the training, or with a raw ``[Errno 17]``)."""
+    for parent in (folder, *folder.parents):
+        if parent.exists():
+            if not parent.is_dir():
+                raise ValueError(f"cannot write into {folder}: {parent} is a file")
+            break
+    for name in names:
+        if (folder / name).is_dir():
+            raise ValueError(f"cannot write {folder / name}: it is a folder")
+
+
 def _sweep_outputs(out_dir: str | Path, name: str, quick: bool) -> tuple[Path, Path]:
     """Sweep ``name``'s runs file and results file. Results without the runs beside them (an
     earlier version's table, or runs moved away) are an error, with ``resume`` too: a sweep
@@ -76,6 +90,7 @@ def _sweep_outputs(out_dir: str | Path, name: str, quick: bool) -> tuple[Path, P
     out = Path(out_dir) / name
     runs_file = out / _output_name("runs", ".jsonl", quick)
     results = out / _output_name("results", ".json", quick)
+    _check_outputs(out, [runs_file.name, results.name, _output_name("figure", ".png", quick)])
     if results.exists() and not runs_file.exists():
         raise ValueError(
             f"{results} exists without its runs ({runs_file.name}), so --resume cannot go on "
@@ -544,9 +559,12 @@ def write_results(results: dict[str, Any], path: str | Path) -> None:
         fh.write(json.dumps(results, indent=1))
 
 
-def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path) -> None:
+def plot_learning_curves(
+    runs: list[dict[str, Any]], preset: Preset, path: Path, n_demos: int | None = None
+) -> None:
     """Success rate and true return against training episodes, one line per method (the
-    paper's Fig. 2; the return is what Table 1 reports for tensioning)."""
+    paper's Fig. 2; the return is what Table 1 reports for tensioning). ``n_demos``: the demos
+    trained from, in the title (default the preset's)."""
     from matplotlib.ticker import MaxNLocator
 
     from sb3_swirl.plotting import _finish, _new_figure
@@ -575,7 +593,7 @@ def plot_learning_curves(runs: list[dict[str, Any]], preset: Preset, path: Path)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.grid(alpha=0.3)
         ax.legend(loc="best")
-    fig.suptitle(f"{preset.env_id}: {preset.n_demos} demos")
+    fig.suptitle(f"{preset.env_id}: {preset.n_demos if n_demos is None else n_demos} demos")
     _finish(fig, path)
 
 
@@ -651,6 +669,13 @@ def run_demo(
     check_int("n_demos", n_demos, low=2)
     check_int("total_timesteps", steps, low=1)
     out = Path(out_dir) / name
+    _check_outputs(
+        out,
+        [
+            *("results.json", "learning_curve.png", "segments.png", "task.json"),
+            *("cut_paths.png", "cut_paths_arc.png", "sheet.png", "final_frame.png"),
+        ],
+    )
     out.mkdir(parents=True, exist_ok=True)
 
     console.rule(f"[bold]SWIRL vs DQN on {preset.env_id}")
@@ -720,7 +745,7 @@ def run_demo(
         "rollout_ratio_swirl_over_dqn": ratio,
     }
     write_results(results, out / "results.json")
-    plot_learning_curves(runs, preset, out / "learning_curve.png")
+    plot_learning_curves(runs, preset, out / "learning_curve.png", n_demos)
 
     table = Table(title=f"{name}: SWIRL vs DQN ({steps} steps each, seed {seed})")
     table.add_column("method")

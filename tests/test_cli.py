@@ -182,6 +182,17 @@ def test_bad_input_is_a_clear_error_not_a_traceback(tmp_path, capsys):
     assert "directory" in capsys.readouterr().err
     assert main(["fit", str(demos), "-o", ""]) == 2  # it said "the output  is a directory"
     assert "the output (-o) is empty" in capsys.readouterr().err
+    # an output file that is a folder, inside the output folder: before the training (it was
+    # found after it), and before a sweep's runs
+    (tmp_path / "d" / "parking" / "learning_curve.png").mkdir(parents=True)
+    assert main(["demo", "parking", "--out", str(tmp_path / "d"), "-q"]) == 2
+    assert "learning_curve.png: it is a folder" in capsys.readouterr().err
+    assert not (tmp_path / "d" / "parking" / "task.json").exists()
+    (tmp_path / "r" / "fig2" / "figure_quick.png").mkdir(parents=True)
+    figure = ["reproduce", "fig2", "--quick", "--panels", "parking", "--out", str(tmp_path / "r")]
+    assert main([*figure, "-q"]) == 2
+    assert "figure_quick.png: it is a folder" in capsys.readouterr().err
+    assert not (tmp_path / "r" / "fig2" / "runs_quick.jsonl").exists()
     for option, value in (("--timesteps", "-5"), ("--n-demos", "1")):
         out = tmp_path / option
         assert main(["demo", "parking", option, value, "--out", str(out), "-q"]) == 2
