@@ -21,6 +21,10 @@ from rich.table import Table
 from sb3_swirl.experiments import PRESETS, REPRODUCTIONS
 
 console = Console(stderr=True)
+# another indicator's dynamics error within 1% of the kept one's is a near tie; `fit` says so
+# when its segment count differs (on the segmentation benchmark: 11 of 145 tuning sets and 5
+# of 145 held-out ones, 4 and 2 of them fits with a switch F1 under 0.9)
+_NEAR_TIE = 0.01
 
 
 def _dims(text: str) -> list[int]:
@@ -243,29 +247,25 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 
 
 def _print_near_ties(kept: str, scores: dict, segments: dict) -> None:
-    """Say which other indicators explain the demos as well (within ``AUTO_TOLERANCE`` of the
-    lowest dynamics error, where ``"auto"`` keeps the fewest segments) with more segments."""
-    from sb3_swirl.segmentation import AUTO_TOLERANCE
-
-    lowest = min(error for error in scores.values() if error is not None)
+    """Say which other indicators explain the demos nearly as well with another count."""
     close: dict[int, list[str]] = {}
     for name, error in scores.items():
         if (
             error is not None
             and segments[name] not in (0, segments[kept])
-            and error <= lowest * (1 + AUTO_TOLERANCE)
+            and error <= scores[kept] * (1 + _NEAR_TIE)
         ):
             close.setdefault(segments[name], []).append(name)
     for count, names in close.items():
         names.sort(key=scores.__getitem__)  # the closest first: the one to try
-        worst = max(abs(scores[name] - scores[kept]) for name in names)
+        worst = scores[names[-1]] - scores[kept]
         gap = worst / scores[kept] if scores[kept] > 0 else 0.0
         console.print(
-            f"  {' and '.join(names)} explain{'s' * (len(names) == 1)} the demos as well "
+            f"  {' and '.join(names)} explain{'s' * (len(names) == 1)} the demos nearly as well "
             f"(within {100 * gap:.2g}%) with {count} segment{'s' * (count != 1)} against "
-            f"{segments[kept]}: the demos barely decide between them, and auto keeps the "
-            f"fewer; to compare, fit with --indicator {names[0]} and look at both with "
-            "`sb3-swirl show TASK --plot DIR --demos DEMOS`"
+            f"{segments[kept]}: the "
+            f"demos barely decide between them; to compare, fit with --indicator {names[0]} "
+            "and look at both with `sb3-swirl show TASK --plot DIR --demos DEMOS`"
         )
 
 

@@ -19,8 +19,7 @@ joined (``"gmm+velocity"``: the union of their candidates), and any callable
 
 ``indicator="auto"`` (the default) fits with each of the first four and keeps the segmentation
 under which locally linear dynamics best predict the demonstrations (:func:`dynamics_cv_error`,
-leave one demonstration out; of those within 1% of the best, the one with the fewest
-segments). Each transition region is then placed where the online
+leave one demonstration out). Each transition region is then placed where the online
 segmentation enters it closest to the demonstrations' own transitions (``align_entries``).
 
 ``benchmarks/bench_segmentation.py`` measures them against known switch points
@@ -753,10 +752,6 @@ def phases_indicator(
 _INDICATORS = ("gmm", "velocity", "linear", "phases", "ruptures")
 # the paper's Fig. 6, then ours; in order of preference (ties go to the first)
 _AUTO_CANDIDATES = ("gmm", "velocity", "linear", "phases")
-#: ``indicator="auto"`` keeps the fewest segments among the candidates whose dynamics error is
-#: within this fraction of the lowest (chosen on the segmentation benchmark's tuning seeds:
-#: 3% cut too few segments there)
-AUTO_TOLERANCE = 0.01
 _BUILTIN = (
     gmm_indicator,
     velocity_indicator,
@@ -1174,9 +1169,7 @@ by "+", or callable, default "auto"
         paper's default; ``"velocity"``; ``"linear"``) and with ``"phases"``
         (:func:`phases_indicator`: phases with their own linear dynamics, shared by every
         demonstration) and keeps the segmentation that best explains the demonstrations as
-        locally linear dynamics (the lowest :func:`dynamics_cv_error`; where others come
-        within 1% of it, the one of them with the fewest segments: the demonstrations do not
-        ask for the extra cuts); only the kept fit's
+        locally linear dynamics (the lowest :func:`dynamics_cv_error`); only the kept fit's
         warnings are shown, ``indicator_`` says which it kept and ``indicator_scores_`` gives
         every score. It is the default because it found switch points best on
         ``benchmarks/bench_segmentation.py`` (README); every shipped task's entry fits with
@@ -1462,8 +1455,7 @@ by "+", or callable, default "auto"
         return self
 
     def _fit_auto(self, demos: list) -> TransitionStateClustering:
-        """Fit with each of ``_AUTO_CANDIDATES``; keep the lowest :func:`dynamics_cv_error`,
-        or the fewest segments among those within ``AUTO_TOLERANCE`` of it."""
+        """Fit with each of ``_AUTO_CANDIDATES``; keep the lowest :func:`dynamics_cv_error`."""
         fits: dict[str, tuple[TransitionStateClustering, list]] = {}
         scores: dict[str, float] = {}
         segments: dict[str, int] = {}
@@ -1496,13 +1488,7 @@ by "+", or callable, default "auto"
                 "indicator='auto': no indicator gave a segmentation; "
                 + "; ".join(f"{', '.join(names)}: {why}" for why, names in reasons.items())
             )
-        # the fewest segments among the candidates within AUTO_TOLERANCE of the lowest error:
-        # where the demos barely decide, a segmentation that cuts more often over-fits them
-        # (the phases indicator picks its number of phases alike); ties: the lowest error, then
-        # the first in order of preference
-        lowest = min(scores[name] for name in fits)
-        near = [name for name in fits if scores[name] <= lowest * (1 + AUTO_TOLERANCE)]
-        best = min(near, key=lambda name: (segments[name], scores[name]))
+        best = min(fits, key=scores.__getitem__)  # ties: the first in order of preference
         chosen, caught = fits[best]
         for key, value in vars(chosen).items():
             if key.endswith("_") and not key.startswith("_"):

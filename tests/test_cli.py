@@ -488,22 +488,23 @@ def test_demos_of_a_dict_env_record_the_state_keys_and_env_settings(tmp_path, ca
 def test_fit_says_when_another_indicator_nearly_ties_with_another_count(capsys):
     from sb3_swirl.cli import _print_near_ties
 
-    # auto keeps phases: the fewest segments among those within 1% of the lowest error
     segments = {"gmm": 13, "velocity": 2, "linear": 3, "phases": 3}
     scores = {"gmm": 1.0, "velocity": 1.5, "linear": 1.004, "phases": 1.003}
-    _print_near_ties("phases", scores, segments)
+    _print_near_ties("gmm", scores, segments)
     said = " ".join(capsys.readouterr().err.split())
-    assert "gmm explains the demos as well (within 0.3%) with 13 segments against 3" in said
-    assert "auto keeps the fewer" in said and "--indicator gmm" in said
+    assert "phases and linear explain the demos nearly as well (within 0.4%) with 3 segments" in (
+        said
+    )
+    assert "against 13" in said and "--indicator phases" in said
     assert "velocity" not in said  # 50% worse is no tie
     # the same count, a failed fit, or a clear winner: nothing to say
     _print_near_ties("linear", {**scores, "gmm": 1.5, "linear": 1.0}, segments)
     _print_near_ties("gmm", {**scores, "linear": None, "phases": 1.02}, segments)
     assert capsys.readouterr().err == ""
-    _print_near_ties("velocity", {**scores, "velocity": 1.001}, {**segments, "velocity": 1})
-    said = " ".join(capsys.readouterr().err.split())
-    assert "phases and linear explain the demos as well (within 0.3%) with 3 segments" in said
-    assert "gmm explains the demos as well (within 0.1%) with 13 segments against 1" in said
+    _print_near_ties("gmm", {**scores, "velocity": 1.001}, {**segments, "velocity": 1})
+    assert "velocity explains the demos nearly as well (within 0.1%) with 1 segment against" in (
+        " ".join(capsys.readouterr().err.split())
+    )
 
 
 def test_fit_reports_a_demo_at_another_rate_as_one_warning_line(tmp_path, capsys):
