@@ -384,7 +384,7 @@ class Lifter:
         self._one_hot = np.eye(task.n_indices, dtype=dtype)
         self._one_hot.flags.writeable = False
         state = space if self.state_key is None else state_space(space, self.state_key)[0]
-        self._width = state.shape[-1:]  # what a state's shape ends with
+        self._width = int(state.shape[-1])  # the values of a state
 
     def state(self, obs: Any) -> np.ndarray:
         """The task state in an (unlifted) observation or batch of observations.
@@ -396,13 +396,16 @@ class Lifter:
             that breaks its own space: the task's regions would read other quantities).
         """
         state = observation_state(obs, self.state_key)
-        shape = state.shape if isinstance(state, np.ndarray) else np.shape(state)
-        if shape[-1:] != self._width:
+        try:  # an array's last axis, at every step: kept cheap
+            wide = state.shape[-1] != self._width
+        except (AttributeError, IndexError):  # a list, a 0-d value
+            wide = np.shape(state)[-1:] != (self._width,)
+        if wide:
             raise ValueError(
                 f"the env returned an observation of shape {np.shape(state)}"
                 + ("" if self.state_key is None else f" under {self.state_key!r}")
-                + f" where its observation space declares {self._width[0]} value"
-                + "s" * (self._width != (1,))
+                + f" where its observation space declares {self._width} value"
+                + "s" * (self._width != 1)
             )
         return state
 
@@ -697,7 +700,7 @@ class SwirlWrapper(TrackedTask, gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, task_reward, terminated, truncated, info = self.env.step(action)
         self._warn_overwritten(info)
-        if not isinstance(task_reward, float | int) and not _real(task_reward):
+        if type(task_reward) is not float and not _real(task_reward):  # float: the fast path
             raise ValueError(f"the env's step returned the reward {task_reward!r}, not a number")
         reward, terminated = self.tracker.step(self.lifter.state(obs), task_reward, terminated)
         reward, segment = float(reward), int(self.tracker.index)
