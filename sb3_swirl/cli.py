@@ -378,6 +378,11 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     for flag in ("panels", "methods"):
         if getattr(args, flag) and args.name not in EXPERIMENTS:
             raise ValueError(f"--{flag} applies to the figures, not to {args.name}")
+    for flag in ("seeds", "panels", "methods"):  # one was run once, and the table said so
+        given = getattr(args, flag) or []
+        twice = sorted({value for value in given if given.count(value) > 1})
+        if twice:
+            raise ValueError(f"--{flag} names {', '.join(map(str, twice))} more than once")
     common = {
         "quick": args.quick,
         "out_dir": args.out,

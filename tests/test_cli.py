@@ -595,6 +595,8 @@ def test_reproduce_fig2_runs_end_to_end_and_resumes(tmp_path, capsys):
     assert main(["reproduce", "table2", "--methods", "swirl", "--out", str(tmp_path)]) == 2
     assert main(["reproduce", "fig2", "--address", "auto", "--out", str(tmp_path)]) == 2
     assert "--address is a Ray cluster's: add --backend ray" in _err(capsys)
+    assert main(["reproduce", "table2", "--seeds", "3", "3", "--out", str(tmp_path)]) == 2
+    assert "--seeds names 3 more than once" in _err(capsys)  # one seed ran, silently
     assert main(["reproduce", "fig9", "--repeats", "3", "--seeds", "1", "--out", "x"]) == 2
     assert "repeats sets Fig. 9's demo-set seeds (100, 101, ...): drop seeds" in _err(capsys)
 
