@@ -60,7 +60,7 @@ from sb3_swirl.demos import (
 from sb3_swirl.vec_env import swirl_task, trained_task
 from swirl_wrappers import RewardConfig, SwirlWrapper, TaskModel
 from swirl_wrappers._validation import check_int
-from swirl_wrappers.wrappers import StateKey, state_space
+from swirl_wrappers.wrappers import StateKey, check_state_key_space, state_space
 
 __all__ = ["RL_ZOO3_VERSION", "SwirlTaskWrapper", "check_config", "main", "register"]
 
@@ -287,11 +287,7 @@ class SwirlTaskWrapper(SwirlWrapper):
         reward = {**(reward_config or {}), **getattr(_TRIAL, "reward_config", {})}
         # settings that cannot work, before the fit takes its time
         RewardConfig().updated(reward)
-        if state_key is not None and not isinstance(env.observation_space, gym.spaces.Dict):
-            raise ValueError(
-                f"SwirlTaskWrapper state_key={state_key!r} is only for Dict observation "
-                f"spaces; this env's is a {type(env.observation_space).__name__}"
-            )
+        check_state_key_space(env.observation_space, state_key)
         if saved:  # enjoy: the task the model was trained with
             model, demonstrations = TaskModel.from_json(Path(saved)), None
         else:

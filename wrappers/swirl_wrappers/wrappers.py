@@ -83,10 +83,7 @@ def lift_observation_space(
         raise ValueError(f"task must be a swirl_wrappers.TaskModel, got {type(task).__name__}")
     n = task.n_indices
     if isinstance(space, spaces.Box):
-        if state_key is not None:
-            raise ValueError(
-                f"state_key={state_key!r} is only for Dict observation spaces; this one is a Box"
-            )
+        check_state_key_space(space, state_key)
         _check_state_space(space, task, "observation space")
         _warn_other_layout(task, space, None)
         lifted = spaces.Box(
@@ -132,6 +129,15 @@ def lift_observation_space(
         f"SWIRL wrappers need a Box or Dict observation space, got {type(space).__name__}; "
         f"{how} and record the demos' states the same way"
     )
+
+
+def check_state_key_space(space: gym.Space, state_key: StateKey) -> None:
+    """Refuse a ``state_key`` for an observation space that is not a Dict (a ValueError)."""
+    if state_key is not None and not isinstance(space, spaces.Dict):
+        raise ValueError(
+            f"state_key={state_key!r} is only for Dict observation spaces; this one is a "
+            f"{type(space).__name__}"
+        )
 
 
 def state_space(
