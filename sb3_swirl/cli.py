@@ -18,7 +18,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from sb3_swirl.experiments import PRESETS, REPRODUCTIONS
+from sb3_swirl.experiments import PRESETS, REPRODUCTIONS, _writable_folder
 
 console = Console(stderr=True)
 # another indicator's dynamics error within 1% of the kept one's is a near tie; `fit` says so
@@ -97,17 +97,6 @@ def _n_demos(text: str) -> int:
     if value < 2:
         raise argparse.ArgumentTypeError(f"SWIRL needs at least 2 demonstrations, got {text!r}")
     return value
-
-
-def _writable_folder(path: Path) -> None:
-    """Raise unless files can be made in folder ``path`` (created if missing, as by mkdir -p)."""
-    existing = path
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir():
-        raise ValueError(f"cannot write into {path}: {existing} is not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise ValueError(f"cannot write into {path}: {existing} is not writable")
 
 
 def _check_output(output: str, *inputs: str | None) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import statistics
 import sys
 import textwrap
@@ -69,15 +70,22 @@ def _kept_warnings() -> Iterator[list[str]]:
     )
 
 
+def _writable_folder(path: Path) -> None:
+    """Raise unless files can be made in folder ``path`` (created if missing, as by mkdir -p)."""
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"cannot write into {path}: {existing} is not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"cannot write into {path}: {existing} is not writable")
+
+
 def _check_outputs(folder: Path, names: Sequence[str]) -> None:
-    """Raise before any work where the files ``names`` cannot be written into ``folder``: it,
-    or the first of its parents that exists, is a file, or one of the names is a folder (the
-    write failed after the training, or with a raw ``[Errno 17]``)."""
-    for parent in (folder, *folder.parents):
-        if parent.exists():
-            if not parent.is_dir():
-                raise ValueError(f"cannot write into {folder}: {parent} is a file")
-            break
+    """Raise before any work where the files ``names`` cannot be written into ``folder``: it
+    cannot be made or written into, or one of the names is a folder (the write failed after
+    the training, or with a raw ``[Errno 17]``)."""
+    _writable_folder(folder)
     for name in names:
         if (folder / name).is_dir():
             raise ValueError(f"cannot write {folder / name}: it is a folder")
