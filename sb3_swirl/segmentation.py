@@ -1878,22 +1878,20 @@ by "+", or callable, default "auto"
         The error says when the demonstrations end far apart (a goal that changes per episode),
         the usual reason why they start inside the goal region.
         """
-        problems, at_goal, lacking = [], [], []  # lacking: the demo of each problem
+        problems: dict[int, str] = {}  # per incomplete demo, what it lacks
+        at_goal = []
         for n, bounds in enumerate(segments):
             if bounds[0] == 0:
-                problems.append(f"demo {n} starts inside region 0")
+                problems[n] = f"demo {n} starts inside region 0"
                 at_goal.append(n)
-                lacking.append(n)
             elif bounds[-1] < 0:
-                missed = int(np.argmax(bounds < 0))
-                problems.append(f"demo {n} never reaches region {missed}")
-                lacking.append(n)
+                problems[n] = f"demo {n} never reaches region {int(np.argmax(bounds < 0))}"
         complete = len(segments) - len(problems)
         goal_only = self.include_goal and len(self.regions_) == 1
         excused = at_goal if goal_only and 2 * complete >= len(segments) else []
         need = self._min_demos(len(segments))
         if complete + len(excused) < need:
-            shown = "; ".join(problems[:5]) + ("; ..." if len(problems) > 5 else "")
+            shown = "; ".join(list(problems.values())[:5]) + ("; ..." if len(problems) > 5 else "")
             ends = np.array([s[-1] for s in x])
             end_spread = float(np.median(np.linalg.norm(ends - np.median(ends, axis=0), axis=1)))
             travel = float(np.median([np.linalg.norm(s[-1] - s[0]) for s in x]))
@@ -1934,7 +1932,7 @@ by "+", or callable, default "auto"
                 )
                 + f", {need} needed ({shown}). {advice}"
             )
-        short = [p for n, p in zip(lacking, problems, strict=True) if n not in excused]
+        short = [problem for n, problem in problems.items() if n not in excused]
         if short:
             warnings.warn(
                 f"{len(short)} of {len(segments)} demonstrations do not reach every region in "
@@ -1942,9 +1940,8 @@ by "+", or callable, default "auto"
                 f"min_demo_fraction={self.min_demo_fraction} keeps regions that at least "
                 f"{need} of {len(segments)} demos pass. Such a demo stays in the segment "
                 "before the region it misses to its end, so its later states shape that "
-                "segment's reward "
-                "and a BC start (SwirlDQN) clones its later actions under that segment. Fix or "
-                "drop those demos, or raise min_demo_fraction",
+                "segment's reward and a BC start (SwirlDQN) clones its later actions under "
+                "that segment. Fix or drop those demos, or raise min_demo_fraction",
                 SegmentationWarning,
                 stacklevel=4,
             )
