@@ -24,7 +24,7 @@ from sklearn.exceptions import NotFittedError
 
 from sb3_swirl.demos import Demonstration, as_demonstrations
 from swirl_wrappers import Lifter, TaskModel, observation_state
-from swirl_wrappers._validation import check_int, check_option
+from swirl_wrappers._validation import check_int, check_option, check_widths
 
 
 class BCPolicy:
@@ -66,14 +66,7 @@ class BCPolicy:
     ) -> None:
         self.classifier = check_option("classifier", classifier, ("mlp", "svm", "linear_svm"))
         self.state_key = state_key
-        if not isinstance(hidden_layer_sizes, Sequence) or not all(
-            isinstance(width, int | np.integer) and not isinstance(width, bool) and width >= 1
-            for width in hidden_layer_sizes
-        ):
-            raise ValueError(
-                f"hidden_layer_sizes must be a list of layer widths, got {hidden_layer_sizes!r}"
-            )
-        self.hidden_layer_sizes = tuple(int(width) for width in hidden_layer_sizes)
+        self.hidden_layer_sizes = tuple(check_widths("hidden_layer_sizes", hidden_layer_sizes))
         self.max_iter = check_int("max_iter", max_iter, low=1)
         self.random_state = (
             None

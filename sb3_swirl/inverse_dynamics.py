@@ -11,7 +11,7 @@ from sklearn.exceptions import NotFittedError
 from torch import nn
 from torch.nn import functional as F
 
-from swirl_wrappers._validation import check_int, check_real
+from swirl_wrappers._validation import check_int, check_real, check_widths
 
 __all__ = ["InverseDynamics"]
 
@@ -59,11 +59,7 @@ class InverseDynamics:
         batch_size: int = 256,
         seed: int | None = None,
     ) -> None:
-        if not isinstance(net_arch, Sequence) or not all(
-            isinstance(width, int | np.integer) and width >= 1 for width in net_arch
-        ):
-            raise ValueError(f"net_arch must be a list of layer widths, got {net_arch!r}")
-        self.net_arch = [int(width) for width in net_arch]
+        self.net_arch = check_widths("net_arch", net_arch)
         self.epochs = check_int("epochs", epochs, low=1)
         self.lr = check_real("lr", lr, low=0.0, low_open=True)
         self.batch_size = check_int("batch_size", batch_size, low=1)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 from typing import Any
 
 import numpy as np
@@ -56,6 +56,18 @@ def check_int(name: str, value: Any, *, low: int | None = None, high: int | None
             f"{name} must be an integer{_interval(low, high, False, False)}, got {value!r}"
         )
     return int(value)
+
+
+def check_widths(name: str, value: Any) -> list[int]:
+    """``value`` as a list of layer widths: a sequence of integers >= 1 (not bools)."""
+    ok = isinstance(value, Sequence) and not isinstance(value, str)
+    ok = ok and all(
+        isinstance(width, int | np.integer) and not isinstance(width, bool) and width >= 1
+        for width in value
+    )
+    if not ok:
+        raise ValueError(f"{name} must be a list of layer widths, got {value!r}")
+    return [int(width) for width in value]
 
 
 def check_bool(name: str, value: Any) -> bool:
