@@ -628,14 +628,12 @@ def _spelled_out(argv: list[str], script: str) -> list[str]:
 
 
 def _option(argv: list[str], *names: str, default: str | None = None) -> str | None:
-    """The value of the last ``--name value`` / ``--name=value`` among ``names`` in ``argv``."""
+    """The value of the last ``--name value`` among ``names`` in ``argv`` (spelled out by
+    :func:`_spelled_out`: ``--name=value`` is split there)."""
     value = default
-    for i, arg in enumerate(argv):
-        for name in names:
-            if arg == name and i + 1 < len(argv):
-                value = argv[i + 1]
-            elif arg.startswith(name + "="):
-                value = arg.split("=", 1)[1]
+    for i, arg in enumerate(argv[:-1]):
+        if arg in names:
+            value = argv[i + 1]
     return value
 
 
